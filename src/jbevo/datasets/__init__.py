@@ -1,0 +1,1 @@
+"""Datasets: simulators and readers that produce sequences for the models."""
