@@ -59,9 +59,9 @@ class SigmaWeights(NamedTuple):
 class MerweScaled(eqx.Module):
     """Van der Merwe's scaled sigma points (see the module docstring for the formulas)."""
 
-    alpha: float = eqx.field(static=True, default=1.0)
-    beta: float = eqx.field(static=True, default=2.0)
-    kappa: float = eqx.field(static=True, default=0.0)
+    alpha: float = eqx.field(static=True, default=1.0, converter=float)
+    beta: float = eqx.field(static=True, default=2.0, converter=float)
+    kappa: float = eqx.field(static=True, default=0.0, converter=float)
 
     def __check_init__(self):
         if not self.alpha > 0:
@@ -88,7 +88,7 @@ class MerweScaled(eqx.Module):
 class Julier(eqx.Module):
     """Julier and Uhlmann's symmetric sigma points; ``kappa=None`` means ``3 - n``."""
 
-    kappa: float | None = eqx.field(static=True, default=None)
+    kappa: float | None = eqx.field(static=True, default=None, converter=lambda k: None if k is None else float(k))
 
     def weights(self, n: int, dtype=None) -> SigmaWeights:
         """Weights for an ``n``-dimensional state, in ``dtype`` (default: JAX's float)."""
