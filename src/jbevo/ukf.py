@@ -42,6 +42,7 @@ from jbevo.unscented import (
     MerweScaled,
     ResidualFn,
     residuals,
+    sigma_offsets,
     sigma_points,
     weighted_mean,
     weighted_outer,
@@ -122,11 +123,11 @@ def update(
     """
     mean, cov = state
     w = scheme.weights(mean.shape[-1], mean.dtype)
-    points = sigma_points(mean, linalg.cholesky(cov), w.spread, model.state_add)
+    dx = sigma_offsets(linalg.cholesky(cov), w.spread)  # = residuals of the points from the mean
+    points = sigma_points(mean, None, w.spread, model.state_add, offsets=dx)
     z_points = jax.vmap(model.measurement)(points)
     z_pred = weighted_mean(z_points, w.mean, model.measurement_mean)
     dz = residuals(z_points, z_pred, model.measurement_residual)
-    dx = residuals(points, mean, model.state_residual)
     s = weighted_outer(w.cov, dz, dz) + measurement_cov
     cross = weighted_outer(w.cov, dx, dz)
 

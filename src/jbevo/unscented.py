@@ -107,24 +107,34 @@ def _as_weights(wm, wc, spread, dtype) -> SigmaWeights:
     return SigmaWeights(jnp.asarray(wm, dtype), jnp.asarray(wc, dtype), jnp.asarray(spread, dtype))
 
 
+def sigma_offsets(chol: Float[Array, "n n"], spread: Float[Array, ""]) -> Float[Array, "N n"]:
+    """The ``2n + 1`` sigma-point offsets ``[0, s L_1 .. s L_n, -s L_1 .. -s L_n]`` from the mean.
+
+    They are also the exact residuals of the sigma points from their mean, which saves
+    recomputing (and re-wrapping) them where the points were just drawn.
+    """
+    offsets = spread * jnp.swapaxes(chol, -1, -2)  # row i = column i of chol
+    return jnp.concatenate([jnp.zeros_like(offsets[:1]), offsets, -offsets], axis=0)
+
+
 def sigma_points(
     mean: Float[Array, " n"],
     chol: Float[Array, "n n"],
     spread: Float[Array, ""],
     add_fn: AddFn | None = None,
+    offsets: Float[Array, "N n"] | None = None,
 ) -> Float[Array, "N n"]:
     """The ``2n + 1`` sigma points ``[m, m + s L_1 .. m + s L_n, m - s L_1 .. m - s L_n]``.
 
     ``chol`` is the lower Cholesky factor ``L`` of the covariance (columns ``L_i``); ``add_fn``
-    replaces ``+`` (for angles). The order matches filterpy's ``MerweScaledSigmaPoints``.
+    replaces ``+`` (for angles); ``offsets`` may pass precomputed :func:`sigma_offsets`. The
+    order matches filterpy's ``MerweScaledSigmaPoints``.
     """
-    offsets = spread * jnp.swapaxes(chol, -1, -2)  # row i = column i of chol
-    offsets = jnp.concatenate([offsets, -offsets], axis=0)
+    if offsets is None:
+        offsets = sigma_offsets(chol, spread)
     if add_fn is None:
-        moved = mean + offsets
-    else:
-        moved = jax.vmap(add_fn, in_axes=(None, 0))(mean, offsets)
-    return jnp.concatenate([mean[None], moved], axis=0)
+        return mean + offsets
+    return jax.vmap(add_fn, in_axes=(None, 0))(mean, offsets)
 
 
 def weighted_mean(points: Float[Array, "N d"], weights: Float[Array, " N"], mean_fn: MeanFn | None = None):
