@@ -27,7 +27,7 @@ import numpy as np  # noqa: E402
 
 from jbevo import ukf  # noqa: E402
 from jbevo.datasets.planar import simulate_planar_sequence  # noqa: E402
-from jbevo.geometry import se2_compose, wrap_angle  # noqa: E402
+from jbevo.geometry import wrap_angle  # noqa: E402
 from jbevo.localization import planar_pose_model  # noqa: E402
 from jbevo.unscented import MerweScaled  # noqa: E402
 

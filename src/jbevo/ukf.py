@@ -249,8 +249,10 @@ def filter_blocks(
         raise ValueError(f"measurements must have shape (T, K, m), got {measurements.shape}")
     steps, block, m = measurements.shape
     _check_controls(controls, steps, "controls", "T", block)
-    if mask is not None and jnp.shape(mask) != measurements.shape:
-        raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {jnp.shape(mask)}")
+    if mask is not None:
+        mask = jnp.asarray(mask, dtype=bool)
+        if mask.shape != measurements.shape:
+            raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {mask.shape}")
     motion_cov, measurement_cov = jnp.asarray(motion_cov), jnp.asarray(measurement_cov)
     initial = GaussianState(*(jnp.asarray(a) for a in initial))
     n = _check_state(initial)
