@@ -41,6 +41,7 @@ from jbevo.unscented import (
     MeanFn,
     MerweScaled,
     ResidualFn,
+    offset_points,
     residuals,
     sigma_offsets,
     sigma_points,
@@ -124,7 +125,7 @@ def update(
     mean, cov = state
     w = scheme.weights(mean.shape[-1], mean.dtype)
     dx = sigma_offsets(linalg.cholesky(cov), w.spread)  # = residuals of the points from the mean
-    points = sigma_points(mean, None, w.spread, model.state_add, offsets=dx)
+    points = offset_points(mean, dx, model.state_add)
     z_points = jax.vmap(model.measurement)(points)
     z_pred = weighted_mean(z_points, w.mean, model.measurement_mean)
     dz = residuals(z_points, z_pred, model.measurement_residual)

@@ -117,24 +117,25 @@ def sigma_offsets(chol: Float[Array, "n n"], spread: Float[Array, ""]) -> Float[
     return jnp.concatenate([jnp.zeros_like(offsets[:1]), offsets, -offsets], axis=0)
 
 
+def offset_points(mean: Float[Array, " n"], offsets: Float[Array, "N n"], add_fn: AddFn | None = None):
+    """``mean + offsets[k]`` for every row (``add_fn`` replaces ``+`` for angles)."""
+    if add_fn is None:
+        return mean + offsets
+    return jax.vmap(add_fn, in_axes=(None, 0))(mean, offsets)
+
+
 def sigma_points(
     mean: Float[Array, " n"],
     chol: Float[Array, "n n"],
     spread: Float[Array, ""],
     add_fn: AddFn | None = None,
-    offsets: Float[Array, "N n"] | None = None,
 ) -> Float[Array, "N n"]:
     """The ``2n + 1`` sigma points ``[m, m + s L_1 .. m + s L_n, m - s L_1 .. m - s L_n]``.
 
     ``chol`` is the lower Cholesky factor ``L`` of the covariance (columns ``L_i``); ``add_fn``
-    replaces ``+`` (for angles); ``offsets`` may pass precomputed :func:`sigma_offsets`. The
-    order matches filterpy's ``MerweScaledSigmaPoints``.
+    replaces ``+`` (for angles). The order matches filterpy's ``MerweScaledSigmaPoints``.
     """
-    if offsets is None:
-        offsets = sigma_offsets(chol, spread)
-    if add_fn is None:
-        return mean + offsets
-    return jax.vmap(add_fn, in_axes=(None, 0))(mean, offsets)
+    return offset_points(mean, sigma_offsets(chol, spread), add_fn)
 
 
 def weighted_mean(points: Float[Array, "N d"], weights: Float[Array, " N"], mean_fn: MeanFn | None = None):
