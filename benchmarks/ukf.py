@@ -10,11 +10,9 @@ float64. Writes ``benchmarks/results/ukf.json`` and prints a table.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -27,6 +25,7 @@ import numpy as np  # noqa: E402
 
 from jbevo import ukf  # noqa: E402
 from jbevo.datasets.planar import simulate_planar_sequence  # noqa: E402
+from jbevo.files import write_json_atomic  # noqa: E402
 from jbevo.geometry import wrap_angle  # noqa: E402
 from jbevo.localization import planar_pose_model  # noqa: E402
 from jbevo.unscented import MerweScaled  # noqa: E402
@@ -209,14 +208,6 @@ def print_table(r: dict) -> None:
           f"{r['jbevo_single_checked']:,.0f} steps/s")
     print(f"max |jbevo - filterpy| = {r['max_abs_diff_vs_filterpy']:.2e}, "
           f"max |jbevo - dynamax| = {r['max_abs_diff_vs_dynamax']:.2e}")
-
-
-def write_json_atomic(path: Path, data: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, delete=False, suffix=".tmp") as f:
-        json.dump(data, f, indent=2, sort_keys=True)
-        tmp = f.name
-    os.replace(tmp, path)
 
 
 if __name__ == "__main__":

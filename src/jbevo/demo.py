@@ -13,10 +13,7 @@ errors before and after, and writes ``metrics.json`` to ``--out`` if given.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -27,6 +24,7 @@ import optax
 
 from jbevo import ukf
 from jbevo.datasets.planar import PlanarSequence, simulate_planar_sequence
+from jbevo.files import write_json_atomic
 from jbevo.geometry import wrap_angle
 from jbevo.localization import planar_pose_model
 
@@ -128,19 +126,6 @@ def main(argv: list[str] | None = None) -> dict:
         write_json_atomic(args.out / "metrics.json", metrics)
         print(f"wrote {args.out / 'metrics.json'}")
     return metrics
-
-
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write JSON through a temporary file and a rename, so no half-written file is left."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
 
 
 if __name__ == "__main__":
