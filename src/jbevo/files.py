@@ -8,8 +8,8 @@ import tempfile
 from pathlib import Path
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write ``data`` as JSON to ``path`` through a temporary file in the same folder and a rename.
+def write_atomic(path: Path, write, mode: str = "w") -> None:
+    """Call ``write(file)`` on a temporary file in ``path``'s folder, then rename it to ``path``.
 
     Creates the folder if needed. On any failure the temporary file is removed and ``path`` keeps
     its previous content.
@@ -18,10 +18,19 @@ def write_json_atomic(path: Path, data: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
     try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, sort_keys=True)
-            f.write("\n")
+        with os.fdopen(fd, mode) as f:
+            write(f)
         os.replace(tmp, path)
     except BaseException:
         os.unlink(tmp)
         raise
+
+
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (see :func:`write_atomic`)."""
+    write_atomic(path, lambda f: f.write(text))
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    """Write ``data`` as indented, key-sorted JSON to ``path`` atomically."""
+    write_atomic(path, lambda f: f.write(json.dumps(data, indent=2, sort_keys=True) + "\n"))
