@@ -1,0 +1,154 @@
+"""The pitch/roll DUKF: gyro integration as motion, accelerometer tilt as measurement.
+
+State ``(pitch, roll)`` (radians, ZYX Euler, positive pitch nose down), optionally with a gyro
+bias ``(bx, by, bz)`` (rad/s, random walk). One filter step per camera frame:
+
+* **Motion**: integrate the gyro samples between the two frames with the exact ZYX Euler-rate
+  kinematics, ``pitch' = cos(roll) wy - sin(roll) wz`` and
+  ``roll' = wx + tan(pitch) (sin(roll) wy + cos(roll) wz)`` (forward Euler per IMU sample). The
+  seed's ``[w_pitch, w_roll] * dt`` ignores the coupling through roll and the yaw rate; in a turn
+  at 2 deg of roll it mistakes 3.5 % of the yaw rate for pitch rate.
+* **Measurement**: the tilt of the mean specific force over the frame's samples,
+  ``pitch = -atan2(ax, sqrt(ay^2 + az^2))``, ``roll = atan2(ay, az)``. The accelerometer also feels
+  the car's own acceleration (braking, centripetal force: often 1-3 m/s^2, several degrees of false
+  tilt); the *motion-compensated* measurement first removes the body acceleration predicted from
+  the odometry's body-frame velocity and the gyro, ``dv/dt + w x v`` (:func:`body_acceleration`).
+
+Q (per frame) and R are learnable :class:`jbevo.ukf.DiagonalCovariance` s. Missing IMU samples
+(NaN) are skipped: a frame's motion integrates its valid gyro samples with the mean of those
+filling the gaps, its measurement averages the valid accelerometer samples, and a frame with none
+makes no update (the UKF skips NaN measurements exactly).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from jbevo import ukf
+
+
+def euler_rates(pitch: Array, roll: Array, omega: Float[Array, "... 3"]) -> tuple[Array, Array]:
+    """``(d pitch / dt, d roll / dt)`` from body rates ``omega = (wx, wy, wz)`` (ZYX Euler)."""
+    wx, wy, wz = omega[..., 0], omega[..., 1], omega[..., 2]
+    sr, cr = jnp.sin(roll), jnp.cos(roll)
+    pitch_dot = cr * wy - sr * wz
+    roll_dot = wx + jnp.tan(pitch) * (sr * wy + cr * wz)
+    return pitch_dot, roll_dot
+
+
+def accel_tilt(accel: Float[Array, "... 3"]) -> Float[Array, "... 2"]:
+    """``(pitch, roll)`` of a specific-force vector (gravity only: exact)."""
+    ax, ay, az = accel[..., 0], accel[..., 1], accel[..., 2]
+    return jnp.stack([-jnp.arctan2(ax, jnp.sqrt(ay**2 + az**2)), jnp.arctan2(ay, az)], -1)
+
+
+def _fill_missing(samples: Float[Array, "S 3"]) -> Float[Array, "S 3"]:
+    """Replace NaN rows by the mean of the valid rows (zero if none), NaN-free in value and grad."""
+    ok = jnp.all(jnp.isfinite(samples), axis=-1, keepdims=True)
+    clean = jnp.where(ok, samples, 0.0)
+    mean = jnp.sum(clean, axis=0) / jnp.maximum(jnp.sum(ok), 1)
+    return jnp.where(ok, clean, mean)
+
+
+def integrate_gyro(state: Float[Array, " n"], gyro: Float[Array, "S 3"], dt: float) -> Float[Array, " n"]:
+    """Propagate ``(pitch, roll[, bias])`` over the (NaN-free) gyro samples of one frame."""
+    bias = state[2:5] if state.shape[0] == 5 else jnp.zeros(3, state.dtype)
+
+    def step(pr, omega):
+        pitch_dot, roll_dot = euler_rates(pr[0], pr[1], omega - bias)
+        return pr + dt * jnp.stack([pitch_dot, roll_dot]), None
+
+    pr, _ = jax.lax.scan(step, state[:2], gyro)
+    return jnp.concatenate([pr, state[2:]])
+
+
+def _measure(state):
+    return state[:2]
+
+
+@functools.cache
+def attitude_model(dt: float, gyro_bias: bool = False) -> ukf.StateSpaceModel:
+    """The UKF model; cached so that jitted code sees the same (hashable) model."""
+    del gyro_bias  # the state size tells integrate_gyro whether a bias is present
+    return ukf.StateSpaceModel(motion=functools.partial(integrate_gyro, dt=dt), measurement=_measure)
+
+
+def body_acceleration(
+    velocity: Float[Array, "T 2"], gyro: Float[Array, "T 3"], frame_dt: float
+) -> Float[Array, "T 3"]:
+    """Predicted body-frame acceleration ``dv/dt + w x v`` of a vehicle whose body-frame velocity
+    is planar, ``v = (vx, vy, 0)`` (what the odometry gives), with ``w`` the frame's mean gyro.
+
+    For a car without side slip (``vy = 0``) this is ``(dvx/dt, vx wz, -vx wy)``.
+    """
+    v = jnp.concatenate([velocity, jnp.zeros_like(velocity[:, :1])], axis=-1)
+    return jnp.gradient(v, frame_dt, axis=0) + jnp.cross(gyro, v)
+
+
+def tilt_measurements(accel: Float[Array, "T S 3"], compensation: Float[Array, "T 3"] | None = None) -> Array:
+    """Per-frame tilt of the mean valid specific force (NaN for a frame without samples)."""
+    ok = jnp.all(jnp.isfinite(accel), axis=-1, keepdims=True)
+    count = jnp.sum(ok, axis=1)
+    mean = jnp.sum(jnp.where(ok, accel, 0.0), axis=1) / jnp.maximum(count, 1)
+    if compensation is not None:
+        mean = mean - compensation
+    tilt = accel_tilt(mean)
+    return jnp.where(count > 0, tilt, jnp.nan)
+
+
+class AttitudeFilter(eqx.Module):
+    """Learnable pitch/roll filter. ``motion_noise`` is per frame: 2 values (pitch, roll), or 5
+    with the gyro bias state; ``measurement_noise`` 2 values (pitch, roll of the tilt)."""
+
+    motion_noise: ukf.DiagonalCovariance
+    measurement_noise: ukf.DiagonalCovariance
+    dt: float = eqx.field(static=True)
+
+    @classmethod
+    def create(
+        cls,
+        dt: float = 0.01,
+        motion_std=(2e-4, 2e-4),
+        measurement_std=(0.02, 0.02),
+        gyro_bias: bool = False,
+        bias_walk_std: float = 2e-5,
+    ) -> AttitudeFilter:
+        """Defaults are hand-set: ~0.01 deg of gyro error per frame, ~1 deg of false tilt."""
+        q = list(motion_std) + ([bias_walk_std] * 3 if gyro_bias else [])
+        return cls(ukf.DiagonalCovariance.from_std(jnp.asarray(q)), ukf.DiagonalCovariance.from_std(jnp.asarray(measurement_std)), dt)
+
+    @property
+    def gyro_bias(self) -> bool:
+        return self.motion_noise.log_std.shape[0] == 5
+
+    def __call__(
+        self,
+        gyro: Float[Array, "T S 3"],
+        accel: Float[Array, "T S 3"],
+        initial: Float[Array, " 2"] | None = None,
+        compensation: Float[Array, "T 3"] | None = None,
+        initial_std: float = 0.03,
+        initial_bias_std: float = 0.005,
+    ) -> Float[Array, "T 2"]:
+        """Filtered ``(pitch, roll)`` after each frame's samples. ``initial`` defaults to the tilt
+        of the first frame's accelerometer samples."""
+        if gyro.ndim != 3 or gyro.shape[-1] != 3 or accel.shape != gyro.shape:
+            raise ValueError(f"gyro and accel must both have shape (T, S, 3), got {gyro.shape} and {accel.shape}")
+        if compensation is not None and compensation.shape != (gyro.shape[0], 3):
+            raise ValueError(f"compensation must have shape ({gyro.shape[0]}, 3), got {compensation.shape}")
+        z = tilt_measurements(accel, compensation)
+        gyro = jax.vmap(_fill_missing)(gyro)
+        if initial is None:
+            initial = jnp.nan_to_num(z[0])
+        n = 5 if self.gyro_bias else 2
+        mean = jnp.concatenate([initial, jnp.zeros(n - 2, initial.dtype)])
+        std = jnp.asarray([initial_std] * 2 + [initial_bias_std] * (n - 2), initial.dtype)
+        prior = ukf.GaussianState(mean, jnp.diag(std**2))
+        model = attitude_model(self.dt, self.gyro_bias)
+        result = ukf.filter(model, prior, gyro, z, self.motion_noise(), self.measurement_noise())
+        return result.filtered_mean[:, :2]
