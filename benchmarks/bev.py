@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
 from pathlib import Path
 
 import cv2
@@ -24,16 +23,7 @@ import numpy as np
 
 from jbevo import camera as cam
 from jbevo.files import write_json_atomic
-
-
-def best_seconds(fn, repeats: int) -> float:
-    jax.block_until_ready(fn())
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
+from timing import best_seconds
 
 
 def main() -> None:

@@ -36,6 +36,7 @@ from skimage.registration import phase_cross_correlation
 
 from jbevo.files import write_json_atomic
 from jbevo.registration import DPCParams, register, register_translation
+from timing import best_seconds
 
 PHOTOS = ("grass", "gravel", "brick", "camera")
 CROP = 256
@@ -91,16 +92,6 @@ def angle_error_deg(est, true) -> np.ndarray:
 
 def shift_error_px(est, true) -> np.ndarray:
     return np.linalg.norm(np.asarray(est) - true, axis=-1)
-
-
-def best_seconds(fn, repeats: int) -> float:
-    jax.block_until_ready(fn())
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def run_jbevo(sets, batch: int, repeats: int, params: DPCParams) -> dict:

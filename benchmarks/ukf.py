@@ -29,22 +29,12 @@ from jbevo.files import write_json_atomic  # noqa: E402
 from jbevo.geometry import wrap_angle  # noqa: E402
 from jbevo.localization import planar_pose_model  # noqa: E402
 from jbevo.unscented import MerweScaled  # noqa: E402
+from timing import best_seconds  # noqa: E402
 
 ALPHA, BETA, KAPPA = 1.0, 2.0, 0.0
 Q = np.diag([0.02, 0.01, 0.005]) ** 2
 R = np.diag([0.5, 0.5, 0.05]) ** 2
 P0 = np.diag([1.0, 1.0, 0.1]) ** 2
-
-
-def best_time(fn, repeats: int) -> float:
-    """Best wall time of ``fn()`` over ``repeats`` runs (after one warm-up call)."""
-    jax.block_until_ready(fn())
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 # --------------------------------------------------------------------------------- jbevo
@@ -141,15 +131,15 @@ def main(argv=None) -> dict:
     dyn_batch = jax.jit(jax.vmap(lambda m, P, u, z: dyn(m, P, u, z)))
 
     results: dict = {"T": steps, "batch": batch, "dtype": "float64", "alpha": ALPHA, "beta": BETA, "kappa": KAPPA}
-    t = best_time(lambda: jb_single(x0[0], one.increments, one.fixes), args.repeats)
+    t = best_seconds(lambda: jb_single(x0[0], one.increments, one.fixes), args.repeats)
     results["jbevo_single"] = steps / t
-    t = best_time(lambda: jb_checked(x0[0], one.increments, one.fixes), args.repeats)
+    t = best_seconds(lambda: jb_checked(x0[0], one.increments, one.fixes), args.repeats)
     results["jbevo_single_checked"] = steps / t
-    t = best_time(lambda: jb_batch(x0, seqs.increments, seqs.fixes), args.repeats)
+    t = best_seconds(lambda: jb_batch(x0, seqs.increments, seqs.fixes), args.repeats)
     results["jbevo_vmap64"] = batch * steps / t
-    t = best_time(lambda: dyn_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]), args.repeats)
+    t = best_seconds(lambda: dyn_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]), args.repeats)
     results["dynamax_single"] = steps / t
-    t = best_time(lambda: dyn_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped), args.repeats)
+    t = best_seconds(lambda: dyn_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped), args.repeats)
     results["dynamax_vmap64"] = batch * steps / t
 
     fp_steps = args.filterpy_steps or steps
