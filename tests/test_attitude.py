@@ -47,8 +47,8 @@ def wobbly_drive(seconds: float = 60.0, seed: int = 0):
     vb = np.stack([np.cos(yaw_s) * vw[:, 0] + np.sin(yaw_s) * vw[:, 1], -np.sin(yaw_s) * vw[:, 0] + np.cos(yaw_s) * vw[:, 1]], -1)
     gyro = d.gyro[: n * 10].reshape(n, 10, 3)
     accel = d.accel[: n * 10].reshape(n, 10, 3)
-    comp = attitude.body_acceleration(jnp.asarray(vb.reshape(n, 10, 2).mean(1)), jnp.asarray(gyro.mean(1)), 0.1)
-    return jnp.asarray(gyro), jnp.asarray(accel), comp, d.frame_euler[1:, 1:], jnp.asarray(d.frame_euler[0, 1:])
+    velocity = jnp.asarray(vb.reshape(n, 10, 2).mean(1))
+    return jnp.asarray(gyro), jnp.asarray(accel), velocity, d.frame_euler[1:, 1:], jnp.asarray(d.frame_euler[0, 1:])
 
 
 @pytest.fixture(scope="module")
@@ -61,17 +61,17 @@ def rmse_deg(est, truth):
 
 
 def test_filter_beats_accelerometer_tilt_and_compensation_helps(drive):
-    gyro, accel, comp, truth, initial = drive
+    gyro, accel, velocity, truth, initial = drive
     run = eqx.filter_jit(lambda f, c: f(gyro, accel, initial, c))
     accel_only = rmse_deg(attitude.tilt_measurements(accel), truth)
     plain = rmse_deg(run(attitude.AttitudeFilter.create(), None), truth)
-    compensated = rmse_deg(run(attitude.AttitudeFilter.create(gyro_bias=True), comp), truth)
+    compensated = rmse_deg(run(attitude.AttitudeFilter.create(gyro_bias=True), velocity), truth)
     assert plain < accel_only / 2
     assert compensated < plain / 3 and compensated < 0.3, (accel_only, plain, compensated)
 
 
 def test_missing_samples_are_skipped(drive):
-    gyro, accel, comp, truth, initial = drive
+    gyro, accel, velocity, truth, initial = drive
     f = attitude.AttitudeFilter.create()
     clean = f(gyro, accel, initial)
     rng = np.random.default_rng(2)
@@ -85,13 +85,13 @@ def test_missing_samples_are_skipped(drive):
 
 
 def test_gradients_match_finite_differences(drive):
-    gyro, accel, comp, truth, initial = drive
-    gyro, accel, comp, truth = gyro[:100], accel[:100], comp[:100], jnp.asarray(truth[:100])
+    gyro, accel, velocity, truth, initial = drive
+    gyro, accel, velocity, truth = gyro[:100], accel[:100], velocity[:100], jnp.asarray(truth[:100])
 
     def loss(log_std):
         f = attitude.AttitudeFilter.create(gyro_bias=True)
         f = eqx.tree_at(lambda f: f.measurement_noise.log_std, f, log_std)
-        return jnp.mean((f(gyro, accel, initial, comp) - truth) ** 2)
+        return jnp.mean((f(gyro, accel, initial, velocity) - truth) ** 2)
 
     x = jnp.log(jnp.array([0.02, 0.03]))
     g = jax.grad(loss)(x)
@@ -107,5 +107,5 @@ def test_bad_input_is_named():
     f = attitude.AttitudeFilter.create()
     with pytest.raises(ValueError, match=r"\(T, S, 3\)"):
         f(jnp.zeros((5, 10, 3)), jnp.zeros((5, 10, 2)))
-    with pytest.raises(ValueError, match="compensation must have shape"):
-        f(jnp.zeros((5, 10, 3)), jnp.zeros((5, 10, 3)) + jnp.array([0, 0, 9.8]), compensation=jnp.zeros((4, 3)))
+    with pytest.raises(ValueError, match="velocity must have shape"):
+        f(jnp.zeros((5, 10, 3)), jnp.zeros((5, 10, 3)) + jnp.array([0, 0, 9.8]), velocity=jnp.zeros((5, 3)))

@@ -344,3 +344,22 @@ def test_covariance_parameterisations():
     with pytest.raises(ValueError, match="lower must have"):
         ukf.CholeskyCovariance(jnp.zeros(3), jnp.zeros(2))
     assert isinstance(chol, eqx.Module)
+
+
+def test_measurement_inputs_equal_shifting_the_measurements():
+    # z_t = x + r_t with known per-step r_t is the same as measuring z_t - r_t with h(x) = x.
+    rng = np.random.default_rng(7)
+    steps = 50
+    controls = jnp.asarray(rng.normal(size=(steps, 2)) * 0.1)
+    offsets = jnp.asarray(rng.normal(size=(steps, 2)))
+    z = jnp.asarray(rng.normal(size=(steps, 2)))
+    prior = ukf.GaussianState(jnp.zeros(2), jnp.eye(2))
+    q, r = 0.01 * jnp.eye(2), 0.5 * jnp.eye(2)
+    with_inputs = ukf.StateSpaceModel(motion=lambda x, u: x + u, measurement=lambda x, off: x + off)
+    plain = ukf.StateSpaceModel(motion=lambda x, u: x + u, measurement=lambda x: x)
+    a = ukf.filter(with_inputs, prior, controls, z, q, r, measurement_inputs=offsets)
+    b = ukf.filter(plain, prior, controls, z - offsets, q, r)
+    np.testing.assert_allclose(a.filtered_mean, b.filtered_mean, atol=1e-12)
+    np.testing.assert_allclose(a.log_likelihood, b.log_likelihood, atol=1e-10)
+    with pytest.raises(ValueError, match="measurement_inputs"):
+        ukf.filter(with_inputs, prior, controls, z, q, r, measurement_inputs=offsets[:-1])

@@ -13,6 +13,9 @@ bias ``(bx, by, bz)`` (rad/s, random walk). One filter step per camera frame:
   the car's own acceleration (braking, centripetal force: often 1-3 m/s^2, several degrees of false
   tilt); the *motion-compensated* measurement first removes the body acceleration predicted from
   the odometry's body-frame velocity and the gyro, ``dv/dt + w x v`` (:func:`body_acceleration`).
+  The gyro's bias enters that term as ``b x v`` (0.3 deg/s of yaw-rate bias at 10 m/s is
+  0.05 m/s^2 of false lateral force); with the bias state the measurement model predicts it, so
+  the filter can tell it from tilt.
 
 Q (per frame) and R are learnable :class:`jbevo.ukf.DiagonalCovariance` s. Missing IMU samples
 (NaN) are skipped: a frame's motion integrates its valid gyro samples with the mean of those
@@ -67,15 +70,28 @@ def integrate_gyro(state: Float[Array, " n"], gyro: Float[Array, "S 3"], dt: flo
     return jnp.concatenate([pr, state[2:]])
 
 
+GRAVITY = 9.80665
+
+
 def _measure(state):
     return state[:2]
 
 
+def _measure_compensated(state, velocity):
+    """Tilt the compensated specific force should show: gravity in the body frame minus the part
+    of ``w x v`` that the gyro bias put into the compensation, ``b x v``."""
+    pitch, roll = state[0], state[1]
+    g = GRAVITY * jnp.stack([-jnp.sin(pitch), jnp.cos(pitch) * jnp.sin(roll), jnp.cos(pitch) * jnp.cos(roll)])
+    return accel_tilt(g - jnp.cross(state[2:5], velocity))
+
+
 @functools.cache
-def attitude_model(dt: float, gyro_bias: bool = False) -> ukf.StateSpaceModel:
-    """The UKF model; cached so that jitted code sees the same (hashable) model."""
-    del gyro_bias  # the state size tells integrate_gyro whether a bias is present
-    return ukf.StateSpaceModel(motion=functools.partial(integrate_gyro, dt=dt), measurement=_measure)
+def attitude_model(dt: float, bias_in_compensation: bool = False) -> ukf.StateSpaceModel:
+    """The UKF model; cached so that jitted code sees the same (hashable) model. With
+    ``bias_in_compensation`` the measurement takes the frame's body velocity and accounts for
+    the gyro bias inside the compensation's ``w x v`` (state with bias only)."""
+    measurement = _measure_compensated if bias_in_compensation else _measure
+    return ukf.StateSpaceModel(motion=functools.partial(integrate_gyro, dt=dt), measurement=measurement)
 
 
 def body_acceleration(
@@ -131,24 +147,35 @@ class AttitudeFilter(eqx.Module):
         gyro: Float[Array, "T S 3"],
         accel: Float[Array, "T S 3"],
         initial: Float[Array, " 2"] | None = None,
-        compensation: Float[Array, "T 3"] | None = None,
+        velocity: Float[Array, "T 2"] | None = None,
         initial_std: float = 0.03,
         initial_bias_std: float = 0.005,
     ) -> Float[Array, "T 2"]:
         """Filtered ``(pitch, roll)`` after each frame's samples. ``initial`` defaults to the tilt
-        of the first frame's accelerometer samples."""
+        of the first frame's accelerometer samples. With ``velocity`` (the odometry's planar
+        body-frame velocity per frame, m/s) the measurement is motion-compensated; with a bias
+        state the measurement model also removes the bias's share of the compensation."""
         if gyro.ndim != 3 or gyro.shape[-1] != 3 or accel.shape != gyro.shape:
             raise ValueError(f"gyro and accel must both have shape (T, S, 3), got {gyro.shape} and {accel.shape}")
-        if compensation is not None and compensation.shape != (gyro.shape[0], 3):
-            raise ValueError(f"compensation must have shape ({gyro.shape[0]}, 3), got {compensation.shape}")
-        z = tilt_measurements(accel, compensation)
+        if velocity is not None and velocity.shape != (gyro.shape[0], 2):
+            raise ValueError(f"velocity must have shape ({gyro.shape[0]}, 2), got {velocity.shape}")
         gyro = jax.vmap(_fill_missing)(gyro)
+        v3 = None
+        compensation = None
+        if velocity is not None:
+            v3 = jnp.concatenate([velocity, jnp.zeros_like(velocity[:, :1])], axis=-1)
+            compensation = body_acceleration(velocity, jnp.mean(gyro, axis=1), self.dt * gyro.shape[1])
+        z = tilt_measurements(accel, compensation)
         if initial is None:
             initial = jnp.nan_to_num(z[0])
         n = 5 if self.gyro_bias else 2
         mean = jnp.concatenate([initial, jnp.zeros(n - 2, initial.dtype)])
         std = jnp.asarray([initial_std] * 2 + [initial_bias_std] * (n - 2), initial.dtype)
         prior = ukf.GaussianState(mean, jnp.diag(std**2))
-        model = attitude_model(self.dt, self.gyro_bias)
-        result = ukf.filter(model, prior, gyro, z, self.motion_noise(), self.measurement_noise())
+        bias_in_compensation = self.gyro_bias and velocity is not None
+        model = attitude_model(self.dt, bias_in_compensation)
+        result = ukf.filter(
+            model, prior, gyro, z, self.motion_noise(), self.measurement_noise(),
+            measurement_inputs=v3 if bias_in_compensation else None,
+        )
         return result.filtered_mean[:, :2]

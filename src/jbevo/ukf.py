@@ -56,7 +56,9 @@ _LOG_2PI = 1.8378770664093453
 class StateSpaceModel(eqx.Module):
     """The pure functions of a nonlinear model with additive Gaussian noise.
 
-    ``motion(x, u) -> x'`` and ``measurement(x) -> z``; the optional functions replace ``-``,
+    ``motion(x, u) -> x'`` and ``measurement(x) -> z`` (or ``measurement(x, r) -> z`` when the
+    filter is given per-step ``measurement_inputs`` r, data the prediction of z depends on besides
+    the state); the optional functions replace ``-``,
     ``+`` and the weighted mean for states (``state_*``) and measurements (``measurement_*``)
     that hold angles (see :mod:`jbevo.unscented`). All are static: a model holds no arrays, its
     learnable noise is passed to the filter separately.
@@ -116,17 +118,22 @@ def update(
     measurement_cov: Float[Array, "m m"],
     scheme: Scheme = MerweScaled(),
     mask: Bool[Array, " m"] | None = None,
+    measurement_input: Any = None,
 ) -> tuple[GaussianState, Float[Array, ""]]:
     """Condition ``state`` on ``measurement`` (noise ``measurement_cov``, R).
 
     Entries that are NaN or where ``mask`` is False are skipped exactly (module docstring).
+    With ``measurement_input`` r, the model's measurement is called as ``measurement(x, r)``.
     Returns the posterior and ``log p(measurement)`` under the predictive distribution.
     """
     mean, cov = state
     w = scheme.weights(mean.shape[-1], mean.dtype)
     dx = sigma_offsets(linalg.cholesky(cov), w.spread)  # = residuals of the points from the mean
     points = offset_points(mean, dx, model.state_add)
-    z_points = jax.vmap(model.measurement)(points)
+    if measurement_input is None:
+        z_points = jax.vmap(model.measurement)(points)
+    else:
+        z_points = jax.vmap(model.measurement, in_axes=(0, None))(points, measurement_input)
     z_pred = weighted_mean(z_points, w.mean, model.measurement_mean)
     dz = residuals(z_points, z_pred, model.measurement_residual)
     s = weighted_outer(w.cov, dz, dz) + measurement_cov
@@ -162,9 +169,9 @@ def _noise_at(noise: Array, t_noise):
 
 
 def _step(model, scheme, q_const, r_const, state, inputs):
-    control, z, mask, q_t, r_t = inputs
+    control, z, mask, q_t, r_t, z_input = inputs
     predicted = predict(model, state, control, _noise_at(q_const, q_t), scheme)
-    filtered, ll = update(model, predicted, z, _noise_at(r_const, r_t), scheme, mask)
+    filtered, ll = update(model, predicted, z, _noise_at(r_const, r_t), scheme, mask, z_input)
     return filtered, (filtered, predicted, ll)
 
 
@@ -180,6 +187,7 @@ def filter(
     mask: Bool[Array, "T m"] | None = None,
     check_inputs: bool = True,
     unroll: int = 1,
+    measurement_inputs: Any = None,
 ) -> FilterResult:
     """Run the UKF over a sequence with ``jax.lax.scan``.
 
@@ -190,7 +198,8 @@ def filter(
     ``mask == False`` are skipped. ``check_inputs`` raises (via ``equinox.error_if``, also
     under ``jit``) on non-finite controls or initial state, and on Q, R or the initial
     covariance that are not finite symmetric positive definite. ``unroll`` is passed to
-    ``lax.scan``.
+    ``lax.scan``. ``measurement_inputs`` (a pytree with leading axis ``T``, or ``None``) is
+    passed to the model as ``measurement(x, measurement_inputs[t])``.
     """
     initial = GaussianState(*(jnp.asarray(a) for a in initial))
     measurements = jnp.asarray(measurements)
@@ -200,6 +209,8 @@ def filter(
         raise ValueError(f"measurements must have shape (T, m), got {measurements.shape}")
     steps, m = measurements.shape
     _check_controls(controls, steps, "controls", "T")
+    if measurement_inputs is not None:
+        _check_controls(measurement_inputs, steps, "measurement_inputs", "T")
     _check_noise(motion_cov, n, steps, "motion_cov")
     _check_noise(measurement_cov, m, steps, "measurement_cov")
     if mask is not None:
@@ -207,7 +218,8 @@ def filter(
         if mask.shape != measurements.shape:
             raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {mask.shape}")
     control0 = jax.tree.map(lambda a: a[0], controls)
-    _check_model(model, initial, control0, m)
+    z_input0 = None if measurement_inputs is None else jax.tree.map(lambda a: a[0], measurement_inputs)
+    _check_model(model, initial, control0, m, z_input0)
     if check_inputs:
         initial, controls, motion_cov, measurement_cov = _checked(initial, controls, motion_cov, measurement_cov)
 
@@ -218,7 +230,7 @@ def filter(
         return _step(model, scheme, q_const, r_const, state, inputs)
 
     _, (filtered, predicted, lls) = jax.lax.scan(
-        body, initial, (controls, measurements, mask, q_seq, r_seq), unroll=unroll
+        body, initial, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), unroll=unroll
     )
     return FilterResult(filtered.mean, filtered.cov, predicted.mean, predicted.cov, lls, jnp.sum(lls))
 
@@ -264,7 +276,7 @@ def filter_blocks(
         initial, controls, motion_cov, measurement_cov = _checked(initial, controls, motion_cov, measurement_cov)
 
     def inner(state, inputs):
-        return _step(model, scheme, motion_cov, measurement_cov, state, (*inputs, None, None))
+        return _step(model, scheme, motion_cov, measurement_cov, state, (*inputs, None, None, None))
 
     def run_block(state, inputs):
         last, (_, predicted, lls) = jax.lax.scan(inner, state, inputs)
@@ -307,13 +319,13 @@ def _check_controls(controls: Any, steps: int, name: str, axis: str, block: int 
             )
 
 
-def _check_model(model: StateSpaceModel, initial: GaussianState, control: Any, m: int) -> None:
+def _check_model(model: StateSpaceModel, initial: GaussianState, control: Any, m: int, z_input: Any = None) -> None:
     n = initial.mean.shape[0]
     x = jax.ShapeDtypeStruct((n,), initial.mean.dtype)
     moved = jax.eval_shape(model.motion, x, control)
     if getattr(moved, "shape", None) != (n,):
         raise ValueError(f"model.motion must return a state of shape ({n},), got {getattr(moved, 'shape', moved)}")
-    z = jax.eval_shape(model.measurement, x)
+    z = jax.eval_shape(model.measurement, x) if z_input is None else jax.eval_shape(model.measurement, x, z_input)
     if getattr(z, "shape", None) != (m,):
         raise ValueError(
             f"model.measurement must return shape ({m},) to match the measurements, got {getattr(z, 'shape', z)}"
