@@ -62,10 +62,8 @@ def load_sequence(root: Path, name: str, speed_noise: float) -> dict:
     rng = np.random.default_rng(100 + int(name))
     # The odometry's planar body-frame velocity (a stand-in until BEVO's own is available): the
     # true world velocity turned into the body's heading, plus noise.
-    yaw = d.euler[: n * SAMPLES, 0]
-    vw = d.velocity[: n * SAMPLES]
-    vb = np.stack([np.cos(yaw) * vw[:, 0] + np.sin(yaw) * vw[:, 1], -np.sin(yaw) * vw[:, 0] + np.cos(yaw) * vw[:, 1]], -1)
-    vb = vb.reshape(n, SAMPLES, 2).mean(1) + rng.normal(0, speed_noise, (n, 2))
+    vb = imu.planar_body_velocity(d)[: n * SAMPLES].reshape(n, SAMPLES, 2).mean(1)
+    vb = vb + rng.normal(0, speed_noise, (n, 2))
     return {
         "gyro": gyro,
         "accel": accel,

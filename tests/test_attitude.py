@@ -42,9 +42,7 @@ def wobbly_drive(seconds: float = 60.0, seed: int = 0):
     poses[:, 0, 3], poses[:, 1, 3] = x, y
     d = imu.simulate_imu(t, poses, noise=imu.ADIS16448, seed=seed)
     n = len(t) - 1
-    yaw_s = d.euler[: n * 10, 0]
-    vw = d.velocity[: n * 10]
-    vb = np.stack([np.cos(yaw_s) * vw[:, 0] + np.sin(yaw_s) * vw[:, 1], -np.sin(yaw_s) * vw[:, 0] + np.cos(yaw_s) * vw[:, 1]], -1)
+    vb = imu.planar_body_velocity(d)[: n * 10]
     gyro = d.gyro[: n * 10].reshape(n, 10, 3)
     accel = d.accel[: n * 10].reshape(n, 10, 3)
     velocity = jnp.asarray(vb.reshape(n, 10, 2).mean(1))

@@ -50,12 +50,19 @@ def accel_tilt(accel: Float[Array, "... 3"]) -> Float[Array, "... 2"]:
     return jnp.stack([-jnp.arctan2(ax, jnp.sqrt(ay**2 + az**2)), jnp.arctan2(ay, az)], -1)
 
 
-def _fill_missing(samples: Float[Array, "S 3"]) -> Float[Array, "S 3"]:
-    """Replace NaN rows by the mean of the valid rows (zero if none), NaN-free in value and grad."""
+def _valid_mean(samples: Float[Array, "... S 3"]) -> tuple[Array, Array, Array]:
+    """Mean over the sample axis of the rows without NaN, the row mask and the count (the mean is
+    zero where no row is valid); NaN-free in value and gradient."""
     ok = jnp.all(jnp.isfinite(samples), axis=-1, keepdims=True)
     clean = jnp.where(ok, samples, 0.0)
-    mean = jnp.sum(clean, axis=0) / jnp.maximum(jnp.sum(ok), 1)
-    return jnp.where(ok, clean, mean)
+    count = jnp.sum(ok, axis=-2)
+    return jnp.sum(clean, axis=-2) / jnp.maximum(count, 1), ok, count
+
+
+def _fill_missing(samples: Float[Array, "S 3"]) -> Float[Array, "S 3"]:
+    """Replace NaN rows by the mean of the valid rows (zero if none), NaN-free in value and grad."""
+    mean, ok, _ = _valid_mean(samples)
+    return jnp.where(ok, jnp.where(ok, samples, 0.0), mean)
 
 
 def integrate_gyro(state: Float[Array, " n"], gyro: Float[Array, "S 3"], dt: float) -> Float[Array, " n"]:
@@ -108,9 +115,7 @@ def body_acceleration(
 
 def tilt_measurements(accel: Float[Array, "T S 3"], compensation: Float[Array, "T 3"] | None = None) -> Array:
     """Per-frame tilt of the mean valid specific force (NaN for a frame without samples)."""
-    ok = jnp.all(jnp.isfinite(accel), axis=-1, keepdims=True)
-    count = jnp.sum(ok, axis=1)
-    mean = jnp.sum(jnp.where(ok, accel, 0.0), axis=1) / jnp.maximum(count, 1)
+    mean, _, count = _valid_mean(accel)
     if compensation is not None:
         mean = mean - compensation
     tilt = accel_tilt(mean)

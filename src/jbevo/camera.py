@@ -117,14 +117,21 @@ def bev_to_image_homography(camera: Camera, grid: BevGrid, pitch, roll) -> Float
     return ground_to_image_homography(camera, pitch, roll) @ grid.pixel_to_ground()
 
 
+def _apply_homography(h: Float[Array, "3 3"], x: Array, y: Array) -> tuple[Array, Array, Array]:
+    """``(u, v)`` of ``h (x, y, 1)`` and whether its third component is positive (in front);
+    finite also where it is not (the division is guarded)."""
+    w = h[2, 0] * x + h[2, 1] * y + h[2, 2]
+    in_front = w > 1e-6
+    w = jnp.where(in_front, w, 1.0)
+    return (h[0, 0] * x + h[0, 1] * y + h[0, 2]) / w, (h[1, 0] * x + h[1, 1] * y + h[1, 2]) / w, in_front
+
+
 def project_ground_points(camera: Camera, pitch, roll, xy: Float[Array, "... 2"]):
     """Image pixels ``(u, v)`` of level-frame ground points and whether they are in front of the
     camera (``z > 0``)."""
     h = ground_to_image_homography(camera, pitch, roll)
-    p = jnp.einsum("ij,...j->...i", h, jnp.concatenate([xy, jnp.ones_like(xy[..., :1])], -1))
-    in_front = p[..., 2] > 1e-6
-    z = jnp.where(in_front, p[..., 2], 1.0)
-    return p[..., :2] / z[..., None], in_front
+    u, v, in_front = _apply_homography(h, xy[..., 0], xy[..., 1])
+    return jnp.stack([u, v], axis=-1), in_front
 
 
 def bev_project(
@@ -142,11 +149,7 @@ def bev_project(
     h = bev_to_image_homography(camera, grid, pitch, roll).astype(image.dtype)
     rows = jnp.arange(grid.shape[0], dtype=image.dtype)[:, None]
     cols = jnp.arange(grid.shape[1], dtype=image.dtype)[None, :]
-    w = h[2, 0] * cols + h[2, 1] * rows + h[2, 2]
-    in_front = w > 1e-6
-    w = jnp.where(in_front, w, 1.0)
-    u = (h[0, 0] * cols + h[0, 1] * rows + h[0, 2]) / w
-    v = (h[1, 0] * cols + h[1, 1] * rows + h[1, 2]) / w
+    u, v, in_front = _apply_homography(h, cols, rows)
     height, width = camera.image_shape
     valid = in_front & (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
     u = jnp.where(valid, u, 0.0)

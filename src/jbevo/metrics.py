@@ -44,15 +44,6 @@ ALIGNMENTS = ("none", "se3", "sim3", "4dof")
 # ----------------------------------------------------------------------------- SE(3) helpers
 
 
-def se3_inverse(pose: Float[Array, "... 4 4"]) -> Float[Array, "... 4 4"]:
-    """Inverse of rigid transforms (rotation transposed); exact for orthonormal rotations."""
-    r = jnp.swapaxes(pose[..., :3, :3], -1, -2)
-    t = -jnp.einsum("...ij,...j->...i", r, pose[..., :3, 3])
-    top = jnp.concatenate([r, t[..., None]], axis=-1)
-    bottom = jnp.broadcast_to(jnp.array([0.0, 0.0, 0.0, 1.0], pose.dtype), top.shape[:-2] + (1, 4))
-    return jnp.concatenate([top, bottom], axis=-2)
-
-
 def general_inverse(pose: Float[Array, "... 4 4"]) -> Float[Array, "... 4 4"]:
     """``inv`` of any 4x4 (what the devkit uses: estimates need not be exactly orthonormal)."""
     return jnp.linalg.inv(pose)
@@ -308,6 +299,7 @@ def rpe(
 
 
 class Evaluation(NamedTuple):
+    segments: SegmentErrors  # per segment, before pooling (what evaluate_batch pools)
     kitti: KittiErrors
     ate_m: Array
     rpe: RelativePoseError
@@ -339,6 +331,7 @@ def evaluate(
     est_aligned = apply_alignment(est_rel, a)
     seg = kitti_segment_errors(gt_rel, est_aligned, valid)
     return Evaluation(
+        segments=seg,
         kitti=kitti_errors(seg),
         ate_m=ate(gt_rel, est_aligned, valid),
         rpe=rpe(gt_rel, est_aligned, rpe_delta, rpe_unit, valid),
@@ -361,7 +354,7 @@ def evaluate_batch(
 
     def one(g, e, v):
         ev = evaluate(g, e, v, alignment, up_axis)
-        return kitti_segment_errors(ev.gt, ev.aligned, v), ev.ate_m
+        return ev.segments, ev.ate_m
 
     seg, ates = jax.vmap(one)(gt, est, valid)
     flat = SegmentErrors(*[x.reshape((-1,) + x.shape[2:]) for x in seg])

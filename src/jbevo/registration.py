@@ -43,6 +43,8 @@ import numpy as np
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
+from jbevo.geometry import wrap_angle
+
 _TINY = 1e-30  # keeps sqrt differentiable at exactly zero spectra
 _WHITEN_EPS = 1e-6  # whitening regulariser relative to the mean cross-power magnitude
 # Featureless input: an image whose windowed standard deviation is below ~1e-4 (intensities in
@@ -172,8 +174,13 @@ def rotate_image(image: Float[Array, "H W"], angle: Float[Array, ""]) -> Float[A
     return map_coordinates(image, coords, order=1, mode="constant", cval=0.0)
 
 
+def _safe_norm(re: Array, im: Array) -> Array:
+    """``|re + i im|``, differentiable at 0."""
+    return jnp.sqrt(re**2 + im**2 + _TINY)
+
+
 def _safe_abs(z: Array) -> Array:
-    return jnp.sqrt(jnp.real(z) ** 2 + jnp.imag(z) ** 2 + _TINY)
+    return _safe_norm(jnp.real(z), jnp.imag(z))
 
 
 def _whiten(cross: Array, floor: float) -> Array:
@@ -207,7 +214,7 @@ def log_polar_spectrum(image: Float[Array, "H W"], params: DPCParams) -> Float[A
     re = map_coordinates(jnp.real(spectrum), coords, order=1, mode="wrap")
     im = map_coordinates(jnp.imag(spectrum), coords, order=1, mode="wrap")
     floor = _TEXTURE_FLOOR * (h * w) ** 0.5  # |F| of white noise of std 1e-4
-    return jnp.log(jnp.sqrt(re**2 + im**2 + _TINY) + floor)
+    return jnp.log(_safe_norm(re, im) + floor)
 
 
 def _centre_ramp(shape: tuple[int, int], padded: tuple[int, int], dtype) -> np.ndarray:
@@ -230,12 +237,15 @@ def _gaussian_lowpass(freqs: Array, sigma: Array) -> Array:
     return jnp.exp(-2.0 * (jnp.pi * sigma * freqs) ** 2)
 
 
-def _peak_ratio(local: Array, peak: Array) -> Array:
-    """``local / peak`` clipped to ``[_FLOOR, 1]``; all ``1`` (a flat window) when the peak is not
-    positive. Double-where: no ``0 / 0`` in the value or the gradient."""
+def _log_domain_weights(local: Array, temperature: Array) -> tuple[Array, Array]:
+    """``(local / peak) ** (1 / T)`` over a window and the window's peak. The ratio is clipped to
+    ``[_FLOOR, 1]`` and is all ``1`` (a flat window) when the peak is not positive; double-where:
+    no ``0 / 0`` in the value or the gradient."""
+    peak = jnp.max(local)
     positive = peak > _PEAK_MIN
     safe = jnp.where(positive, peak, 1.0)
-    return jnp.where(positive, jnp.clip(local / safe, _FLOOR, 1.0), 1.0)
+    ratio = jnp.where(positive, jnp.clip(local / safe, _FLOOR, 1.0), 1.0)
+    return jnp.exp(jnp.log(ratio) / temperature), peak
 
 
 def soft_argmax_1d(c: Float[Array, " N"], temperature: Array, half_width: int) -> tuple[Array, Array]:
@@ -246,10 +256,7 @@ def soft_argmax_1d(c: Float[Array, " N"], temperature: Array, half_width: int) -
     n = c.shape[0]
     k = jnp.argmax(c)
     d = jnp.arange(-half_width, half_width + 1)
-    local = jnp.take(c, (k + d) % n)
-    peak = jnp.max(local)
-    ratio = _peak_ratio(local, peak)
-    weight = jnp.exp(jnp.log(ratio) / temperature)
+    weight, peak = _log_domain_weights(jnp.take(c, (k + d) % n), temperature)
     offset = jnp.sum(weight * d) / jnp.sum(weight)
     return jnp.mod(k + offset, n), peak
 
@@ -260,10 +267,7 @@ def soft_argmax_2d(c: Float[Array, "H W"], temperature: Array, half_width: int) 
     k = jnp.argmax(c)
     kr, kc = k // w, k % w
     d = jnp.arange(-half_width, half_width + 1)
-    local = c[((kr + d) % h)[:, None], ((kc + d) % w)[None, :]]
-    peak = jnp.max(local)
-    ratio = _peak_ratio(local, peak)
-    weight = jnp.exp(jnp.log(ratio) / temperature)
+    weight, peak = _log_domain_weights(c[((kr + d) % h)[:, None], ((kc + d) % w)[None, :]], temperature)
     total = jnp.sum(weight)
     row = kr + jnp.sum(weight * d[:, None]) / total
     col = kc + jnp.sum(weight * d[None, :]) / total
@@ -346,10 +350,16 @@ def _check_finite(image: Array, name: str) -> Array:
     return eqx.error_if(image, ~jnp.all(jnp.isfinite(image)), f"register: image {name} contains NaN or inf")
 
 
-def _batched(fn, a, b, params):
+def _checked_batched(fn, a, b, params: DPCParams | None):
+    """Check the shapes, promote to a float dtype, default the parameters, and vmap ``fn(a, b,
+    params)`` over the leading batch axes."""
+    params = DPCParams() if params is None else params
+    a, b = jnp.asarray(a), jnp.asarray(b)
+    _check_pair(a, b)
+    dtype = jnp.result_type(a.dtype, b.dtype, jnp.float32)
     for _ in range(a.ndim - 2):
         fn = jax.vmap(fn, in_axes=(0, 0, None))
-    return fn(a, b, params)
+    return fn(a.astype(dtype), b.astype(dtype), params)
 
 
 def register_translation(
@@ -359,11 +369,7 @@ def register_translation(
 
     Leading batch axes are vmapped.
     """
-    params = DPCParams() if params is None else params
-    a, b = jnp.asarray(a), jnp.asarray(b)
-    _check_pair(a, b)
-    dtype = jnp.result_type(a.dtype, b.dtype, jnp.float32)
-    return _batched(_register_translation_pair, a.astype(dtype), b.astype(dtype), params)
+    return _checked_batched(_register_translation_pair, a, b, params)
 
 
 def _register_translation_pair(a, b, params):
@@ -388,11 +394,7 @@ def register(
     Raises ``ValueError`` for shapes that are not ``(..., H, W)`` alike with ``H, W >= 16``; a NaN or
     inf in either image raises at run time (also under ``jit``).
     """
-    params = DPCParams() if params is None else params
-    a, b = jnp.asarray(a), jnp.asarray(b)
-    _check_pair(a, b)
-    dtype = jnp.result_type(a.dtype, b.dtype, jnp.float32)
-    return _batched(_register_pair, a.astype(dtype), b.astype(dtype), params)
+    return _checked_batched(_register_pair, a, b, params)
 
 
 def _register_pair(a, b, params) -> Registration:
@@ -405,8 +407,7 @@ def _register_pair(a, b, params) -> Registration:
     t0, c0 = _translation_from(jnp.fft.rfft2(turned), fb, a.shape, params)
     t1, c1 = _translation_from(jnp.fft.rfft2(turned[::-1, ::-1]), fb, a.shape, params)
     flip = c1 > c0
-    rotation = jnp.where(flip, half_turn + jnp.pi, half_turn)
-    rotation = jnp.mod(rotation + jnp.pi, 2 * jnp.pi) - jnp.pi
+    rotation = wrap_angle(jnp.where(flip, half_turn + jnp.pi, half_turn))
     return Registration(rotation, jnp.where(flip, t1, t0), jnp.where(flip, c1, c0))
 
 

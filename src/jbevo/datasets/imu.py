@@ -145,11 +145,21 @@ def simulate_imu(
     )
     gyro = gyro + gyro_bias + rng.normal(0, noise.gyro_noise_density * np.sqrt(rate_hz), (n, 3))
     accel = accel + accel_bias + rng.normal(0, noise.accel_noise_density * np.sqrt(rate_hz), (n, 3))
-    e_wrapped = e.copy()
-    e_wrapped[:, 0] = np.mod(e[:, 0] + np.pi, 2 * np.pi) - np.pi
-    frame_euler = ang(frame_times)
-    frame_euler[:, 0] = np.mod(frame_euler[:, 0] + np.pi, 2 * np.pi) - np.pi
-    return ImuData(t, gyro, accel, gyro_bias, e_wrapped, pos(t), pos(t, 1), frame_euler)
+    return ImuData(t, gyro, accel, gyro_bias, _wrap_yaw(e), pos(t), pos(t, 1), _wrap_yaw(ang(frame_times)))
+
+
+def _wrap_yaw(euler: np.ndarray) -> np.ndarray:
+    out = euler.copy()
+    out[:, 0] = np.mod(out[:, 0] + np.pi, 2 * np.pi) - np.pi
+    return out
+
+
+def planar_body_velocity(data: ImuData) -> np.ndarray:
+    """``(M, 2)`` velocity in the heading frame (forward, left), as planar odometry reports it:
+    the world velocity turned by minus the yaw."""
+    c, s = np.cos(data.euler[:, 0]), np.sin(data.euler[:, 0])
+    v = data.velocity
+    return np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], -1)
 
 
 class _Spline:
