@@ -53,6 +53,7 @@ class ImuData(NamedTuple):
     position: np.ndarray  # (M, 3) true position
     velocity: np.ndarray  # (M, 3) true world velocity
     frame_euler: np.ndarray  # (N, 3) true (yaw, pitch, roll) at the frame times (of the smoothed motion)
+    frame_position: np.ndarray  # (N, 3) true position at the frame times (of the smoothed motion)
 
 
 def euler_zyx(r: np.ndarray) -> np.ndarray:
@@ -114,7 +115,7 @@ def simulate_imu(
     their centimetre noise: on KITTI 09 an interpolating spline gives 2.5 m/s^2 RMS horizontal
     acceleration, the 0.01 smoothing spline 1.2 m/s^2 while staying within 4 mm RMS of the
     poses. The simulated motion *is* the smoothed one: ``frame_euler`` is its attitude at the
-    frames (the truth to score against). Their derivatives give the world acceleration and the
+    frames (the truth to score against), ``frame_position`` its position. Their derivatives give the world acceleration and the
     Euler rates, hence the body angular rate and specific force. Noise: white (density * sqrt(rate)), bias random walk
     (random_walk * sqrt(dt) per step) and a turn-on bias, all from ``seed``.
     """
@@ -145,7 +146,7 @@ def simulate_imu(
     )
     gyro = gyro + gyro_bias + rng.normal(0, noise.gyro_noise_density * np.sqrt(rate_hz), (n, 3))
     accel = accel + accel_bias + rng.normal(0, noise.accel_noise_density * np.sqrt(rate_hz), (n, 3))
-    return ImuData(t, gyro, accel, gyro_bias, _wrap_yaw(e), pos(t), pos(t, 1), _wrap_yaw(ang(frame_times)))
+    return ImuData(t, gyro, accel, gyro_bias, _wrap_yaw(e), pos(t), pos(t, 1), _wrap_yaw(ang(frame_times)), pos(frame_times))
 
 
 def _wrap_yaw(euler: np.ndarray) -> np.ndarray:
