@@ -108,8 +108,12 @@ def draw_obstacles(
 def expose(image: Float[Array, "H W"], condition: Condition, key: PRNGKeyArray) -> Array:
     """Exposure, contrast and sensor noise; returns 8-bit."""
     image = jnp.clip(image, 0.0, 1.0)
-    image = condition.gain * image**condition.gamma
-    mid = condition.gain * SKY_HORIZON**condition.gamma * 0.5
-    image = mid + condition.contrast * (image - mid)
-    image = image + condition.noise * jax.random.normal(key, image.shape, image.dtype)
+    if condition.gamma != 1.0:  # static: a pow per pixel only where it does something
+        image = image**condition.gamma
+    image = condition.gain * image
+    if condition.contrast != 1.0:
+        mid = condition.gain * SKY_HORIZON**condition.gamma * 0.5
+        image = mid + condition.contrast * (image - mid)
+    # Uniform noise of the same std: sampling it costs a third of a Gaussian (erfinv) per pixel.
+    image = image + condition.noise * 3.4641016 * (jax.random.uniform(key, image.shape, image.dtype) - 0.5)
     return jnp.round(jnp.clip(image, 0.0, 1.0) * 255.0).astype(jnp.uint8)

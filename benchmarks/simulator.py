@@ -1,0 +1,78 @@
+"""Simulator speed: frames per second of the ground renderer at KITTI size (376x1241, the KITTI
+camera 0 intrinsics) over a procedural drive, alone and as a sequence's frames are made (with
+the day condition's exposure, sensor noise and 8-bit output: ``frames_per_s_kitti_size``), and
+the time for a whole procedural sequence (trajectory, IMU and images) with the small camera.
+
+    python benchmarks/simulator.py [--frames 64] [--repeats 5]
+
+Writes ``benchmarks/results/simulator.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jbevo.camera import Camera
+from jbevo.datasets.conditions import CONDITIONS
+from jbevo.datasets.render import render_batch
+from jbevo.datasets.synthetic import _frames, procedural_sequence
+from jbevo.datasets.trajectories import procedural_drive
+from jbevo.datasets.world import World
+from jbevo.files import write_json_atomic
+from timing import best_seconds
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--frames", type=int, default=64)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "simulator.json")
+    args = parser.parse_args()
+
+    t0 = time.perf_counter()
+    world = World.create("town01")
+    world_seconds = time.perf_counter() - t0
+    camera = Camera.kitti()
+    _, poses = procedural_drive(0, args.frames)
+    poses = jnp.asarray(poses, jnp.float32)
+    times = jnp.arange(args.frames, dtype=jnp.float32) * 0.1
+    keys = jax.random.split(jax.random.PRNGKey(0), args.frames)
+    day = CONDITIONS["day"]
+    render_only = jax.jit(render_batch)
+    seconds_render = best_seconds(lambda: render_only(world, camera, poses), args.repeats)
+    seconds = best_seconds(lambda: _frames(world, camera, poses, times, None, keys, day), args.repeats)
+    kitti_fps = args.frames / seconds
+    print(f"render KITTI size: {args.frames / seconds_render:.1f} frames/s; with exposure, sensor noise and 8-bit "
+          f"output: {kitti_fps:.1f} frames/s ({1e3 * seconds / args.frames:.2f} ms/frame)")
+
+    procedural_sequence(0, 8, world=world)  # compile for the small camera
+    t0 = time.perf_counter()
+    seq = procedural_sequence(1, 200, world=world)
+    jax.block_until_ready(seq.images)
+    seq_seconds = time.perf_counter() - t0
+    print(f"procedural sequence of 200 frames (small camera, IMU, trajectory): {seq_seconds:.2f} s")
+
+    write_json_atomic(args.out, {
+        "frames_per_s_kitti_size": kitti_fps,
+        "ms_per_frame_kitti_size": 1e3 * seconds / args.frames,
+        "render_only_frames_per_s_kitti_size": args.frames / seconds_render,
+        "world_build_s": world_seconds,
+        "procedural_sequence_200_frames_small_camera_s": seq_seconds,
+        "frames": args.frames,
+        "image_shape": list(camera.image_shape),
+        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
+                    "numpy": np.__version__},
+    })
+    print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
