@@ -24,16 +24,14 @@ def poses_from_euler(euler: np.ndarray, position: np.ndarray) -> np.ndarray:
 
 
 def _oscillation(rng, n, dt, frequency, damping, std):
-    """A lightly damped second-order response to white noise (a suspension mode), scaled to
-    ``std``."""
-    w = 2 * np.pi * frequency
-    x, v = 0.0, 0.0
-    out = np.empty(n)
-    for i, e in enumerate(rng.standard_normal(n)):
-        a = -w * w * x - 2 * damping * w * v + w * w * e
-        v += a * dt
-        x += v * dt
-        out[i] = x
+    """A suspension mode: narrow-band motion around ``frequency`` (Hz), the sum of eight
+    sinusoids with random phases and frequencies spread by the mode's ``damping`` (a lightly
+    damped mode's resonance width), scaled to ``std``. Smooth, so its derivatives (the IMU's
+    rates and accelerations) stay physical."""
+    t = np.arange(n) * dt
+    freqs = frequency * (1.0 + damping * rng.standard_normal(8))
+    phases = rng.uniform(0, 2 * np.pi, 8)
+    out = np.sin(2 * np.pi * freqs[:, None] * t[None, :] + phases[:, None]).sum(0)
     return out * (std / (out.std() + 1e-12))
 
 
@@ -49,7 +47,7 @@ def procedural_drive(
 ) -> tuple[np.ndarray, np.ndarray]:
     """A car-like drive: ``(frame_times, body_poses)`` with ``n_frames`` frames.
 
-    Speed follows piecewise-constant targets in ``speed_range`` (held 4-12 s; with
+    The car starts at rest (1 s) and accelerates. Speed follows piecewise-constant targets in ``speed_range`` (held 4-12 s; with
     ``stop_probability`` a stop of 2-5 s) under +-2 m/s^2 of acceleration; curvature is a smooth
     random process limited to ``max_lateral_accel`` and a 7 m turning radius. Pitch and roll are
     the suspension's quasi-static response to the longitudinal and lateral acceleration
@@ -70,9 +68,9 @@ def procedural_drive(
         stop = rng.random() < stop_probability and i > 0
         target[i : i + hold] = 0.0 if stop else rng.uniform(*speed_range)
         i += int(rng.uniform(2.0, 5.0) / dt) if stop else hold
-    target[0] = target[min(n - 1, 1)]
+    target[: int(1.0 / dt)] = 0.0  # start at rest, as a filter is initialised
     speed = np.empty(n)
-    speed[0] = target[0]
+    speed[0] = 0.0
     for k in range(1, n):
         speed[k] = speed[k - 1] + np.clip(target[k] - speed[k - 1], -2.0 * dt, 2.0 * dt)
     speed = gaussian_filter1d(speed, 0.5 / dt, mode="nearest")  # smooth the jerk
