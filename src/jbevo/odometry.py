@@ -129,7 +129,7 @@ class Bevo(eqx.Module):
         return state, z
 
     def _bev(self, image, pitch, roll, camera) -> Array:
-        bev, valid = bev_project(image.astype(jnp.float32) * (1.0 / 255.0), pitch, roll, camera, self.grid)
+        bev, valid = bev_project(image.astype(pitch.dtype) * (1.0 / 255.0), pitch, roll, camera, self.grid)
         weight = _feathered(valid.astype(bev.dtype), self.feather)
         mean = jnp.sum(bev * valid) / jnp.maximum(jnp.sum(valid), 1.0)
         return mean + weight * (bev - mean)
@@ -162,6 +162,8 @@ class Bevo(eqx.Module):
             raise ValueError(f"Bevo runs on one sequence (images (T, H, W)); got images {seq.images.shape}: use jax.vmap")
         if initial_pose is None:
             initial_pose = jnp.nan_to_num(seq.planar[0])
+        dtype = jnp.result_type(float)  # float32, or float64 under jax_enable_x64
+        seq = eqx.tree_at(lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype)))
         s = seq.gyro.shape[1]
         frame_dt = self.attitude.dt * s
         n = 5 if self.attitude.gyro_bias else 2
@@ -169,15 +171,15 @@ class Bevo(eqx.Module):
         tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, accel_tilt(first), 0.0)
         if warm_start:
             tilt0 = seq.pitch_roll[0]
-        mean = jnp.concatenate([tilt0, jnp.zeros(n - 2, tilt0.dtype)])
-        cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * (n - 2), tilt0.dtype))
+        mean = jnp.concatenate([tilt0, jnp.zeros(n - 2, tilt0.dtype)]).astype(dtype)
+        cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * (n - 2), dtype))
         h, w = self.grid.shape
         k = VELOCITY_WINDOW
         # The last second of increments: at rest before a cold start; the true speed held for a
         # second before a warm start.
         step0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) if warm_start else 0.0
-        history = jnp.zeros((k, 2), jnp.float32).at[:, 0].set(step0)
-        carry0 = (ukf.GaussianState(mean, cov), jnp.zeros((h, w), jnp.float32), history, initial_pose.astype(jnp.float32))
+        history = jnp.zeros((k, 2), dtype).at[:, 0].set(step0)
+        carry0 = (ukf.GaussianState(mean, cov), jnp.zeros((h, w), dtype), history, initial_pose.astype(dtype))
 
         @jax.checkpoint
         def step(carry, frame):
@@ -193,7 +195,7 @@ class Bevo(eqx.Module):
             accel_long = jnp.sqrt(((v_new - v_old) / (half * frame_dt)) ** 2 + 1e-6)
             state, z = self._attitude_step(state, gyro, accel, speed, accel_long)
             pitch_roll = {
-                "filter": state.mean[:2],
+                "filter": state.mean[:2].astype(dtype),
                 "zero": jnp.zeros(2, state.mean.dtype),
                 "accel": jnp.nan_to_num(z),
                 "truth": truth,
@@ -204,7 +206,9 @@ class Bevo(eqx.Module):
             pose = se2_compose(pose, new_inc)
             confidence = jnp.where(index > 0, reg.confidence, 0.0)
             past = jnp.concatenate([past[1:], new_inc[None, :2]])
-            return (state, bev, past, pose), (new_inc, pitch_roll, confidence, pose)
+            # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
+            new_carry = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), (state, bev, past, pose), carry)
+            return new_carry, (new_inc, pitch_roll, confidence, pose)
 
         frames = (seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         _, (increments, pitch_roll, confidence, poses) = jax.lax.scan(step, carry0, frames)

@@ -1,0 +1,48 @@
+"""Checkpoints: round trip of the learned values and the optimizer state, and clear errors."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+
+from jbevo import camera as cam
+from jbevo import checkpoint
+from jbevo.odometry import Bevo
+
+
+def test_round_trip_keeps_values_structure_and_optimizer_state(tmp_path):
+    model = Bevo.create(cam.BevGrid(0.2, (32, 32), near=6.0), attitude_source="accel")
+    model = eqx.tree_at(lambda m: m.dpc.highpass, model, jnp.float32(0.77))
+    opt = optax.adam(1e-2)
+    state = opt.init(eqx.filter(model, eqx.is_inexact_array))
+    path = tmp_path / "a.ckpt"
+    checkpoint.save(path, model, state, {"epoch": 3})
+    back, back_state, progress = checkpoint.load(path, opt.init(eqx.filter(Bevo.create(), eqx.is_inexact_array)))
+    assert progress == {"epoch": 3}
+    assert back.grid == model.grid and back.attitude_source == "accel"
+    assert float(back.dpc.highpass) == pytest.approx(0.77)
+    np.testing.assert_allclose(back.attitude.motion_noise.log_std, model.attitude.motion_noise.log_std)
+    assert int(back_state[0].count) == 0
+
+
+def test_errors_name_the_file(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no checkpoint"):
+        checkpoint.load(tmp_path / "missing.ckpt")
+    bad = tmp_path / "bad.ckpt"
+    bad.write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="not a readable jbevo checkpoint"):
+        checkpoint.load(bad)
+    good = tmp_path / "good.ckpt"
+    checkpoint.save(good, Bevo.create())
+    truncated = tmp_path / "truncated.ckpt"
+    truncated.write_bytes(good.read_bytes()[:-300])
+    with pytest.raises(ValueError, match=str(truncated.name)):
+        checkpoint.load(truncated)
+    with np.load(good) as data:
+        arrays = dict(data)
+    arrays["config"] = np.array('{"format": 99}')
+    with open(tmp_path / "future.ckpt", "wb") as f:
+        np.savez(f, **arrays)
+    with pytest.raises(ValueError, match="incompatible"):
+        checkpoint.load(tmp_path / "future.ckpt")
