@@ -87,7 +87,7 @@ def test_vmap_over_sequences_equals_single_runs(world):
 
 def test_learnable_parameters_and_sources():
     model = Bevo.create(GRID)
-    assert model.num_learnable() == 13  # Q: 5, R: 2, DPC: 6
+    assert model.num_learnable() == 14  # Q: 6, R: 2, DPC: 6
     with pytest.raises(ValueError, match="attitude_source"):
         Bevo.create(GRID, attitude_source="gps")
 
@@ -121,4 +121,4 @@ def test_gradient_of_the_loss_matches_finite_differences(world):
             analytic = float(g.reshape(-1)[j])
             assert abs(fd - analytic) <= 0.03 * max(abs(fd), abs(analytic)) + 1e-7, f"leaf {i}[{j}]: finite difference {fd}, grad {analytic}"
             checked += 1
-    assert checked == 13
+    assert checked == 14

@@ -23,7 +23,7 @@ def run_dir(tmp_path_factory):
 
 def test_train_writes_metrics_and_checkpoints(run_dir, capsys):
     metrics = json.loads((run_dir / "metrics.json").read_text())
-    assert metrics["learnable_parameters"] == 13 and metrics["epochs"] == 1
+    assert metrics["learnable_parameters"] == 14 and metrics["epochs"] == 1
     for key in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "motion_rmse_m"):
         assert metrics["before"][key] >= 0 and metrics["after"][key] >= 0
     assert (run_dir / "best.ckpt").is_file() and (run_dir / "last.ckpt").is_file()
