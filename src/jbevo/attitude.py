@@ -122,13 +122,18 @@ def tilt_measurements(accel: Float[Array, "T S 3"], compensation: Float[Array, "
     return jnp.where(count > 0, tilt, jnp.nan)
 
 
-class AttitudeFilter(eqx.Module):
-    """Learnable pitch/roll filter. ``motion_noise`` is per frame: 2 values (pitch, roll), or 5
-    with the gyro bias state; ``measurement_noise`` 2 values (pitch, roll of the tilt)."""
+class _FilterNoise(eqx.Module):
+    """The learnable part of a pitch/roll filter: per-frame motion noise (Q) and measurement
+    noise (R), and the IMU sample interval ``dt``."""
 
     motion_noise: ukf.DiagonalCovariance
     measurement_noise: ukf.DiagonalCovariance
     dt: float = eqx.field(static=True)
+
+
+class AttitudeFilter(_FilterNoise):
+    """Learnable pitch/roll filter. ``motion_noise`` is per frame: 2 values (pitch, roll), or 5
+    with the gyro bias state; ``measurement_noise`` 2 values (pitch, roll of the tilt)."""
 
     @classmethod
     def create(
@@ -234,13 +239,9 @@ def speed_aided_model(dt: float) -> ukf.StateSpaceModel:
     )
 
 
-class SpeedAidedAttitude(eqx.Module):
+class SpeedAidedAttitude(_FilterNoise):
     """Learnable noise of the speed-aided pitch/roll filter: ``motion_noise`` per frame for
     (pitch, roll, 3 gyro biases, speed), ``measurement_noise`` for (lateral tilt, speed)."""
-
-    motion_noise: ukf.DiagonalCovariance
-    measurement_noise: ukf.DiagonalCovariance
-    dt: float = eqx.field(static=True)
 
     @classmethod
     def create(
