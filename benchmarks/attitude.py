@@ -16,6 +16,9 @@ attitude at frame 0.
   the same way. The planar body-frame velocity v stands in
   for the odometry's: the true one (world velocity turned by the yaw) plus N(0, ``--speed-noise``)
   per axis and frame; w is the frame's mean gyro.
+* speed-aided (BEVO's filter, :class:`jbevo.attitude.SpeedAidedAttitude`): the forward
+  accelerometer integrated into a speed state that the stand-in's forward speed measures, roll
+  from the lateral tilt; hand-set and learned the same way.
 
 Writes ``benchmarks/results/attitude.json`` (RMSE in degrees over all frames of 09 and 10, pitch
 and roll pooled) and takes ``bev_per_s`` from ``benchmarks/results/bev.json`` if present.
@@ -41,7 +44,8 @@ import numpy as np  # noqa: E402
 import optax  # noqa: E402
 
 from jbevo import trajectory_io  # noqa: E402
-from jbevo.attitude import AttitudeFilter, integrate_gyro, tilt_measurements  # noqa: E402
+from jbevo import ukf  # noqa: E402
+from jbevo.attitude import AttitudeFilter, SpeedAidedAttitude, integrate_gyro, tilt_measurements  # noqa: E402
 from jbevo.datasets import imu  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
 
@@ -117,6 +121,46 @@ def train(f: AttitudeFilter, data: dict, compensated: bool, steps: int, lr: floa
     return f, history
 
 
+def run_speed_aided(f: SpeedAidedAttitude, gyro, accel, initial, velocity):
+    """The speed-aided filter (BEVO's) over one window, measuring the odometry stand-in's forward
+    speed, from the true initial attitude and speed."""
+    mean = jnp.concatenate([initial, jnp.zeros(3, initial.dtype), velocity[:1, 0]])
+    cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * 3 + [0.1**2], initial.dtype))
+
+    def step(state, x):
+        g, a, v = x
+        state = f.update(f.predict(state, g, a), g, a, v)
+        state = jax.tree_util.tree_map(lambda q, r: q.astype(r.dtype), state, (mean, cov))
+        return state, state.mean[:2]
+
+    return jax.lax.scan(step, ukf.GaussianState(mean, cov), (gyro, accel, velocity[:, 0]))[1]
+
+
+def train_speed_aided(f: SpeedAidedAttitude, data: dict, steps: int, lr: float) -> tuple[SpeedAidedAttitude, list]:
+    def loss(f):
+        est = jax.vmap(lambda g, a, i, v: run_speed_aided(f, g, a, i, v))(
+            data["gyro"], data["accel"], data["initial"], data["velocity"]
+        )
+        return jnp.mean((est - data["truth"]) ** 2)
+
+    opt = optax.adam(lr)
+    state = opt.init(eqx.filter(f, eqx.is_array))
+
+    @eqx.filter_jit
+    def step(f, state):
+        value, grads = eqx.filter_value_and_grad(loss)(f)
+        updates, state = opt.update(grads, state)
+        return eqx.apply_updates(f, updates), state, value
+
+    history = []
+    for i in range(steps):
+        f, state, value = step(f, state)
+        if i % 25 == 0 or i == steps - 1:
+            history.append((i, float(np.degrees(np.sqrt(value)))))
+            print(f"  step {i:4d}  train RMSE {history[-1][1]:.4f} deg", flush=True)
+    return f, history
+
+
 def rmse_deg(estimates: list[np.ndarray], truths: list[np.ndarray]) -> float:
     err = np.concatenate([np.asarray(e) - t for e, t in zip(estimates, truths)])
     return float(np.degrees(np.sqrt(np.mean(err**2))))
@@ -168,13 +212,21 @@ def main() -> None:
     mc, hist_mc = train(mc0, data, True, args.steps, args.lr)
     results["rmse_deg_motion_compensated"] = rmse_deg([run_jit(mc, s, True) for s in test_seqs], truths)
 
+    print("the speed-aided filter (BEVO's attitude), measuring the stand-in's forward speed")
+    sa0 = SpeedAidedAttitude.create(dt=DT)
+    run_sa = eqx.filter_jit(lambda f, s: run_speed_aided(
+        f, *(jnp.asarray(s[k], jnp.float32) for k in ("gyro", "accel", "initial", "velocity"))))
+    results["rmse_deg_speed_aided_handset"] = rmse_deg([run_sa(sa0, s) for s in test_seqs], truths)
+    sa, hist_sa = train_speed_aided(sa0, data, args.steps, args.lr)
+    results["rmse_deg_speed_aided"] = rmse_deg([run_sa(sa, s) for s in test_seqs], truths)
+
     results["learned_std_deg"] = {
         "dukf_motion_per_frame": np.degrees(np.exp(np.asarray(learned.motion_noise.log_std))).tolist(),
         "dukf_measurement": np.degrees(np.exp(np.asarray(learned.measurement_noise.log_std))).tolist(),
         "mc_motion_per_frame": np.degrees(np.exp(np.asarray(mc.motion_noise.log_std))).tolist(),
         "mc_measurement": np.degrees(np.exp(np.asarray(mc.measurement_noise.log_std))).tolist(),
     }
-    results["training_history_deg"] = {"dukf": hist, "motion_compensated": hist_mc}
+    results["training_history_deg"] = {"dukf": hist, "motion_compensated": hist_mc, "speed_aided": hist_sa}
     results["improvement_vs_accel_only"] = {
         "dukf_learned": results["rmse_deg_accel_only"] / results["rmse_deg_dukf_learned"],
         "motion_compensated": results["rmse_deg_accel_only"] / results["rmse_deg_motion_compensated"],

@@ -2,8 +2,10 @@
 09 and 10, here with the synthetic world driven by the real KITTI ground-truth motion and a
 simulated ADIS16448 IMU (or real KITTI data with ``--kitti-root``).
 
-    python experiments/kitti_odometry.py --reference $JBEVO_REFERENCE_DATA [--epochs 3] [--frames 1000]
+    python experiments/kitti_odometry.py --reference $JBEVO_REFERENCE_DATA [--epochs 3] [--frames 500]
+        [--camera kitti|small] [--grid 0.1 256 4.0]
 
+The synthetic camera is KITTI camera 0 at full size and the BEV 256x256 at 0.1 m/px by default.
 Training uses 00-07 (``--frames`` first frames of each) and selects the checkpoint on 08; the
 test sequences 09 and 10 are run whole, every variant starting from the true attitude and speed
 at frame 0 (a filter initialised at a known state, as in the devkit's protocol the trajectories
@@ -27,7 +29,7 @@ from jbevo.camera import BevGrid
 from jbevo.datasets.catalog import load_sequences
 from jbevo.files import write_json_atomic, write_text_atomic
 from jbevo.metrics import SEGMENT_LENGTHS
-from jbevo.odometry import Bevo, BevoOutput
+from jbevo.odometry import BevoOutput
 from jbevo.odometry_metrics import score
 from jbevo.plots import trajectory_top_view
 
@@ -45,7 +47,9 @@ def main() -> int:
     p.add_argument("--reference", type=Path, default=os.environ.get("JBEVO_REFERENCE_DATA"))
     p.add_argument("--kitti-root", type=Path, help="real KITTI odometry data instead of the synthetic world")
     p.add_argument("--epochs", type=int, default=3)
-    p.add_argument("--frames", type=int, default=1000, help="training frames per sequence (0: all)")
+    p.add_argument("--frames", type=int, default=500, help="training frames per sequence (0: all)")
+    p.add_argument("--camera", choices=("small", "kitti"), default="kitti", help="synthetic camera: 128x416 or KITTI's 376x1241")
+    p.add_argument("--grid", type=float, nargs=3, default=(0.1, 256, 4.0), metavar=("RES", "SIZE", "NEAR"), help="BEV")
     p.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = p.parse_args()
     if args.kitti_root is None and args.reference is None:
@@ -54,14 +58,16 @@ def main() -> int:
     poses = None if args.kitti_root else args.reference / "kitti_odom" / "gt_poses"
     run_dir = args.out / "kitti_odometry_run"
     t0 = time.perf_counter()
-    common = ["--dataset", dataset, "--frames", str(args.frames), "--out", str(run_dir)]
+    res, size, near = args.grid
+    common = ["--dataset", dataset, "--frames", str(args.frames), "--out", str(run_dir), "--camera", args.camera,
+              "--grid", str(res), str(int(size)), str(near)]
     common += ["--kitti-root", str(args.kitti_root)] if args.kitti_root else ["--kitti-poses", str(poses)]
     train.main([*common, "--train", *[f"{i:02d}" for i in range(8)], "--val", "08", "--epochs", str(args.epochs)])
     train_seconds = time.perf_counter() - t0
 
     test_names = ["09", "10"]
-    seqs = load_sequences(dataset, test_names, 0, poses, args.kitti_root, "small", seed=900)
-    grid = BevGrid(0.1, (128, 128), near=7.5)
+    seqs = load_sequences(dataset, test_names, 0, poses, args.kitti_root, args.camera, seed=900)
+    grid = BevGrid(res, (int(size), int(size)), near=near)
     rows, outputs = {}, {}
     for label, (params, attitude) in VARIANTS.items():
         ckpt = run_dir / "best.ckpt" if params == "learned" else None
@@ -88,8 +94,8 @@ def main() -> int:
     write_json_atomic(args.out / "kitti_odometry.json", {
         "dataset": dataset, "train": [f"{i:02d}" for i in range(8)], "checkpoint_selection": "08",
         "test": test_names, "training_frames_per_sequence": args.frames, "epochs": args.epochs,
-        "training_seconds": train_seconds, "results": rows, "bev": {"resolution": 0.1, "shape": [128, 128], "near": 7.5},
-        "camera": "small (KITTI camera 0 at 1/3 scale, 128x416)" if dataset == "kitti-synthetic" else "KITTI",
+        "training_seconds": train_seconds, "results": rows, "bev": {"resolution": res, "shape": [int(size)] * 2, "near": near},
+        "camera": args.camera if dataset == "kitti-synthetic" else "KITTI",
     })
     return 0
 
