@@ -130,7 +130,7 @@ def run_speed_aided(f: SpeedAidedAttitude, gyro, accel, initial, velocity):
     def step(state, x):
         g, a, v = x
         state = f.update(f.predict(state, g, a), g, a, v)
-        state = jax.tree_util.tree_map(lambda q, r: q.astype(r.dtype), state, (mean, cov))
+        state = jax.tree_util.tree_map(lambda q, r: q.astype(r.dtype), state, ukf.GaussianState(mean, cov))
         return state, state.mean[:2]
 
     return jax.lax.scan(step, ukf.GaussianState(mean, cov), (gyro, accel, velocity[:, 0]))[1]
