@@ -33,7 +33,7 @@ from jbevo.datasets import sequence as sq
 from jbevo.datasets.catalog import DATASETS, load_sequences
 from jbevo.files import write_json_atomic
 from jbevo.odometry import Bevo, BevoOutput
-from jbevo.odometry_metrics import SHORT_SEGMENTS, score
+from jbevo.odometry_metrics import score, segment_errors, segment_lengths
 from jbevo.plots import trajectory_top_view
 from jbevo.trajectory_io import write_kitti
 
@@ -104,8 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(str(error)) from None
     if args.dataset == "synthetic":
         names = [f"synthetic_{n}" for n in names]
-    short = args.dataset == "synthetic" or (args.frames and args.frames < 1000)
-    lengths = SHORT_SEGMENTS if short else metrics.SEGMENT_LENGTHS
+    lengths = segment_lengths(args.dataset, args.frames)
     imu_dt = seqs[0].imu_dt if np.isfinite(seqs[0].imu_dt) else 0.01
     res, size, near = args.grid
     model = load_model(args.checkpoint, BevGrid(res, (int(size), int(size)), near=near), imu_dt, args.attitude)
@@ -122,9 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         per_sequence[name] = {k: s[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "motion_rmse_m", "yaw_rmse_deg", "segments")}
         print(f"{name}: t_err {s['t_err_pct']:.3f} %  r_err {s['r_err_deg_per_100m']:.3f} deg/100m  ATE {s['ate_m']:.3f} m")
     # Overall: the devkit pools the segments of all sequences.
-    seg = [metrics.kitti_segment_errors(metrics.planar_to_se3(q.planar), metrics.planar_to_se3(o.poses), lengths=lengths,
-                                        step=1 if lengths[0] < 100 else 10) for o, q in zip(outputs, seqs)]
-    pooled = metrics.kitti_errors(seg)
+    pooled = metrics.kitti_errors([segment_errors(o.poses, q.planar, lengths) for o, q in zip(outputs, seqs)])
     sq_err = np.concatenate([np.sum((np.asarray(o.poses)[:, :2] - np.asarray(q.planar)[:, :2]) ** 2, -1) for o, q in zip(outputs, seqs)])
     overall = {"t_err_pct": float(pooled.t_err_pct), "r_err_deg_per_100m": float(pooled.r_err_deg_per_100m),
                "ate_m": float(np.sqrt(sq_err.mean())), "frames_per_s": fps, "segments": int(pooled.segments)}

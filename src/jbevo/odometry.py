@@ -46,7 +46,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jbevo import ukf
-from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt
+from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt, tilt_measurements
 from jbevo.camera import BevGrid, bev_project
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
@@ -149,11 +149,10 @@ class Bevo(eqx.Module):
             state, prev_bev, pose = carry
             image, gyro, accel, truth, index = frame
             predicted = self.attitude.predict(state, gyro, accel)
-            tilt, _, count = _block_tilt(accel)
             pitch_roll = {
                 "filter": predicted.mean[:2].astype(dtype),
                 "zero": jnp.zeros(2, dtype),
-                "accel": jnp.where(count > 0, tilt, 0.0).astype(dtype),
+                "accel": jnp.nan_to_num(tilt_measurements(accel[None])[0]).astype(dtype),
                 "truth": truth,
             }[self.attitude_source]
             bev = self._bev(image, pitch_roll[0], pitch_roll[1], seq.camera)
@@ -170,14 +169,6 @@ class Bevo(eqx.Module):
         frames = (seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         _, (increments, pitch_roll, confidence, poses) = jax.lax.scan(step, carry0, frames)
         return BevoOutput(increments, pitch_roll, confidence, poses)
-
-
-def _block_tilt(accel: Float[Array, "S 3"]):
-    """Tilt of a block's mean valid specific force, and the count of valid samples."""
-    ok = jnp.all(jnp.isfinite(accel), axis=-1, keepdims=True)
-    count = jnp.sum(ok)
-    mean = jnp.sum(jnp.where(ok, accel, 0.0), axis=0) / jnp.maximum(count, 1)
-    return accel_tilt(mean), ok, count
 
 
 def _feathered(valid: Float[Array, "H W"], width: int) -> Float[Array, "H W"]:

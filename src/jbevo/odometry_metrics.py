@@ -13,6 +13,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, Float
 
 from jbevo import metrics
 from jbevo.datasets.sequence import Sequence
@@ -20,6 +21,21 @@ from jbevo.geometry import wrap_angle
 from jbevo.odometry import BevoOutput, relative_motion
 
 SHORT_SEGMENTS = (10.0, 20.0, 30.0, 40.0, 50.0)
+
+
+def segment_lengths(dataset: str, frames: int) -> tuple[float, ...]:
+    """The devkit's 100-800 m, or 10-50 m where the drives are too short for them (the built-in
+    synthetic drives, or a cap of under 1,000 frames)."""
+    short = dataset == "synthetic" or (frames and frames < 1000)
+    return SHORT_SEGMENTS if short else metrics.SEGMENT_LENGTHS
+
+
+def segment_errors(poses: Float[Array, "T 3"], planar: Float[Array, "T 3"], lengths: tuple[float, ...]) -> metrics.SegmentErrors:
+    """Devkit segment errors of one planar estimate against its planar truth (both lifted to
+    z = 0), starting every frame for short segments and every 10 frames (the devkit's step) for
+    the devkit's lengths."""
+    step = 1 if lengths[0] < 100 else 10
+    return metrics.kitti_segment_errors(metrics.planar_to_se3(planar), metrics.planar_to_se3(poses), lengths=lengths, step=step)
 
 
 def score(output: BevoOutput, seq: Sequence, lengths: tuple[float, ...] = metrics.SEGMENT_LENGTHS) -> dict:
@@ -30,11 +46,9 @@ def score(output: BevoOutput, seq: Sequence, lengths: tuple[float, ...] = metric
     if seq.frame_times.ndim == 1:
         output = jax.tree_util.tree_map(lambda x: x[None], output)
         seq = jax.tree_util.tree_map(lambda x: x[None], seq)
-    gt = jax.vmap(metrics.planar_to_se3)(seq.planar)
-    est = jax.vmap(metrics.planar_to_se3)(output.poses)
-    segments = jax.vmap(lambda g, e: metrics.kitti_segment_errors(g, e, lengths=lengths, step=1 if lengths[0] < 100 else 10))(gt, est)
+    segments = jax.vmap(lambda e, g: segment_errors(e, g, lengths))(output.poses, seq.planar)
     pooled = metrics.kitti_errors(metrics.SegmentErrors(*(x.reshape(-1, x.shape[-1]) for x in segments)))
-    per_seq = [metrics.kitti_errors(jax.tree_util.tree_map(lambda x, i=i: x[i], segments)) for i in range(gt.shape[0])]
+    per_seq = [metrics.kitti_errors(jax.tree_util.tree_map(lambda x, i=i: x[i], segments)) for i in range(seq.planar.shape[0])]
     position_error = jnp.sum((output.poses[..., :2] - seq.planar[..., :2]) ** 2, -1)
     truth = jax.vmap(relative_motion)(seq)
     err = (output.increments - truth)[:, 1:]

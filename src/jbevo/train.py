@@ -31,23 +31,22 @@ import numpy as np
 import optax
 from tqdm import tqdm
 
-from jbevo import checkpoint, metrics
+from jbevo import checkpoint
 from jbevo.camera import BevGrid
 from jbevo.datasets import sequence as sq
 from jbevo.datasets.catalog import DATASETS, load_sequences
 from jbevo.datasets.world import TOWNS
 from jbevo.files import write_json_atomic
 from jbevo.odometry import Bevo, motion_loss
-from jbevo.odometry_metrics import SHORT_SEGMENTS, score
+from jbevo.odometry_metrics import SHORT_SEGMENTS, score, segment_lengths
 
 
 def load_datasets(args) -> tuple[list[sq.Sequence], list[sq.Sequence], tuple[float, ...]]:
     """``(train, validation, segment lengths)`` for the chosen dataset."""
     if args.dataset == "synthetic":
+        seeds = [args.seed + i for i in range(args.sequences)]
         n_val = max(1, args.sequences // 5)
-        train_names, val_names = list(range(args.sequences - n_val)), list(range(args.sequences - n_val, args.sequences))
-        train_names = [args.seed + i for i in train_names]
-        val_names = [args.seed + i for i in val_names]
+        train_names, val_names = seeds[:-n_val], seeds[-n_val:]
     else:
         train_names, val_names = args.train, args.val
     try:
@@ -58,8 +57,7 @@ def load_datasets(args) -> tuple[list[sq.Sequence], list[sq.Sequence], tuple[flo
         train, val = load(train_names, seed=args.seed), load(val_names, seed=args.seed + 100)
     except (ValueError, FileNotFoundError) as error:
         raise SystemExit(str(error)) from None
-    short = args.dataset == "synthetic" or (args.frames and args.frames < 1000)
-    return train, val, SHORT_SEGMENTS if short else metrics.SEGMENT_LENGTHS
+    return train, val, segment_lengths(args.dataset, args.frames)
 
 
 def training_windows(seqs: list[sq.Sequence], window: int, stride: int | None = None) -> sq.Sequence:

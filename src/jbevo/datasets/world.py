@@ -136,7 +136,6 @@ class World(eqx.Module):
     atlas: UInt32[Array, "R C"]  # texture * 255 of a texel and its right, lower, lower-right neighbours
     resolution: float = eqx.field(static=True)
     sizes: tuple[int, ...] = eqx.field(static=True)  # edge length of each pyramid level
-    offsets: tuple[tuple[int, int], ...] = eqx.field(static=True)  # (row, col) of each level
 
     @classmethod
     def create(cls, town: Town | str = "town01", size: int = 2048, resolution: float = 0.04) -> World:
@@ -178,7 +177,7 @@ class World(eqx.Module):
         q = np.round(atlas * 255.0).astype(np.uint32)
         q = np.pad(q, ((0, 1), (0, 1)))
         atlas = q[:-1, :-1] | (q[:-1, 1:] << 8) | (q[1:, :-1] << 16) | (q[1:, 1:] << 24)
-        return cls(jnp.asarray(atlas), float(resolution), tuple(lv.shape[0] for lv in levels), tuple(offsets))
+        return cls(jnp.asarray(atlas), float(resolution), tuple(lv.shape[0] for lv in levels))
 
     @property
     def period(self) -> float:
@@ -191,7 +190,7 @@ class World(eqx.Module):
         n0 = self.sizes[0]
         inv = 1.0 / jnp.left_shift(1, level).astype(u0.dtype)  # 2^-k (exp2 is not vectorised on CPU)
         n = jnp.right_shift(n0, level)
-        # Closed form of ``offsets`` (no per-pixel table lookups): level k >= 1 starts at row
+        # Closed form of the packing in ``from_tile`` (no per-pixel table lookups): level k >= 1 starts at row
         # sum_{j=1}^{k-1} (n_j + 1) = n0 - 2 n_k + k - 1 of the column right of level 0.
         row0 = jnp.where(level > 0, n0 - 2 * n + level - 1, 0)
         col0 = jnp.where(level > 0, n0 + 1, 0)
