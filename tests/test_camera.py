@@ -160,3 +160,27 @@ def test_bad_input_is_named():
         cam.Camera(1.0, 1.0, 0.0, 0.0, (10, 10), 0.0)
     with pytest.raises(ValueError, match="resolution must be positive"):
         cam.BevGrid(resolution=0.0)
+
+
+BEV_GRID = cam.BevGrid(0.1, (64, 64), near=7.5)
+
+
+def test_increment_inverts_the_bev_motion_of_ground_points():
+    """DPC's (rotation, translation) between two BEVs -> body increment, checked point by point:
+    ground points seen from the earlier pose, moved by the increment, must land where DPC's
+    image transform puts their pixels."""
+    rng = np.random.default_rng(0)
+    res, (o_row, o_col) = BEV_GRID.resolution, BEV_GRID.origin
+    centre = np.array([(BEV_GRID.shape[1] - 1) / 2, (BEV_GRID.shape[0] - 1) / 2])
+    for _ in range(5):
+        theta, t = rng.uniform(-0.1, 0.1), rng.uniform(-8, 8, 2)
+        dx, dy, dyaw = np.asarray(cam.bev_increment(BEV_GRID, jnp.float32(theta), jnp.asarray(t, jnp.float32)), float)
+        q0 = rng.uniform(5, 15, (10, 2))  # level-frame ground points (x forward, y left)
+        p0 = np.stack([o_col - q0[:, 1] / res, o_row - q0[:, 0] / res], -1)  # (col, row)
+        r_img = np.array([[np.cos(theta), np.sin(theta)], [-np.sin(theta), np.cos(theta)]])
+        p1 = (p0 - centre) @ r_img.T + centre + t
+        q1 = np.stack([(o_row - p1[:, 1]) * res, (o_col - p1[:, 0]) * res], -1)
+        c, s = np.cos(dyaw), np.sin(dyaw)
+        expected = (q0 - [dx, dy]) @ np.array([[c, -s], [s, c]])  # R(dyaw)^T (q0 - d)
+        np.testing.assert_allclose(q1, expected, atol=1e-4)
+        assert dyaw == pytest.approx(-theta, abs=1e-6)

@@ -46,3 +46,17 @@ def test_errors_name_the_file(tmp_path):
         np.savez(f, **arrays)
     with pytest.raises(ValueError, match="incompatible"):
         checkpoint.load(tmp_path / "future.ckpt")
+
+
+def test_bevo_plus_round_trip(tmp_path):
+    from jbevo.localization import BevoPlus
+
+    odometry = Bevo.create(cam.BevGrid(0.05, (32, 32), near=3.0), gyro_window=0.03)
+    model = BevoPlus.create(odometry, cam.BevGrid(0.1, (32, 32), near=3.0), min_confidence=0.1, gyro_yaw=False)
+    model = eqx.tree_at(lambda m: m.fix_log_std, model, jnp.array([-1.0, -2.0, -3.0], jnp.float32))
+    path = tmp_path / "plus.ckpt"
+    checkpoint.save(path, model)
+    back, _, _ = checkpoint.load(path)
+    assert isinstance(back, BevoPlus) and back.map_grid == model.map_grid and back.odometry.grid == odometry.grid
+    assert back.odometry.gyro_window == pytest.approx(0.03) and back.min_confidence == 0.1 and not back.gyro_yaw
+    np.testing.assert_allclose(back.fix_log_std, [-1.0, -2.0, -3.0])

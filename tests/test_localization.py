@@ -3,6 +3,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo import ukf
+from jbevo.datasets import sequence as sq
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
 from jbevo.localization import planar_pose_model
 
@@ -44,3 +45,170 @@ def test_fuses_real_kitti_motion_better_than_odometry_or_fixes_alone(reference_d
     assert rmse(filt_err) < 0.2 * rmse(odo_err)
     yaw_err = np.abs(np.asarray(wrap_angle(res.filtered_mean[:, 2] - truth[1:, 2])))
     assert np.degrees(yaw_err.mean()) < 1.0
+
+
+# ----------------------------------------------------------------------------- BEVO+ on the map
+
+from jbevo.camera import bev_project  # noqa: E402
+from jbevo.datasets.maps import Map  # noqa: E402
+from jbevo.datasets.scenes import SCENE_KINDS, part_range, scene  # noqa: E402
+from jbevo.datasets.world import World  # noqa: E402
+from jbevo.localization import BevoPlus, localization_loss, map_crop, match_to_map  # noqa: E402
+from jbevo.localize import create_model, pose_errors  # noqa: E402
+
+import equinox as eqx  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def world():
+    return World.create("town02", size=512)
+
+
+@pytest.fixture(scope="module")
+def carla(world):
+    """60 frames of a CARLA-style drive (the whole drive, day) and its satellite map."""
+    return scene("carla", "town02", "day", "all", seed=1, world=world, frames=60)
+
+
+def test_map_crop_samples_the_map_where_the_grid_lies():
+    rng = np.random.default_rng(0)
+    image = rng.integers(0, 256, (200, 300)).astype(np.uint8)
+    m = Map(jnp.asarray(image), 30.0, 40.0, 0.25)
+    grid = SCENE_KINDS["carla"].grids()[1]
+    pose = jnp.array([12.3, 20.1, 0.4])
+    crop, inside = map_crop(m, pose, grid)
+    g = np.asarray(grid.ground_points(), float)
+    c, s = np.cos(0.4), np.sin(0.4)
+    wx, wy = 12.3 + c * g[..., 0] - s * g[..., 1], 20.1 + s * g[..., 0] + c * g[..., 1]
+    r, k = (30.0 - wx) / 0.25, (40.0 - wy) / 0.25
+    ok = (r >= 0) & (r <= 199) & (k >= 0) & (k <= 299)
+    np.testing.assert_array_equal(np.asarray(inside), ok)
+    r0, k0 = np.floor(r[ok]).astype(int), np.floor(k[ok]).astype(int)
+    fr, fk = r[ok] - r0, k[ok] - k0
+    im = image.astype(float)
+    at = lambda dr, dk: im[np.minimum(r0 + dr, 199), np.minimum(k0 + dk, 299)]  # noqa: E731
+    expected = (1 - fr) * ((1 - fk) * at(0, 0) + fk * at(0, 1)) + fr * ((1 - fk) * at(1, 0) + fk * at(1, 1))
+    np.testing.assert_allclose(np.asarray(crop)[ok] * 255, expected, atol=1e-6)
+    assert np.all(np.asarray(crop)[~ok] == 0) and 0 < ok.mean() < 1  # the grid hangs over the map's edge
+    grad = jax.grad(lambda p: jnp.sum(map_crop(m, p, grid)[0] * jnp.arange(64.0)[:, None]))(pose)
+    assert np.all(np.isfinite(grad)) and np.any(grad != 0)
+
+
+def test_match_recovers_the_pose_and_the_pitch_error(carla):
+    seq, m = carla.sequence, carla.map
+    grid = SCENE_KINDS["carla"].grids()[1]
+    model = BevoPlus.create(map_grid=grid)
+    match = jax.jit(lambda img, pitch, roll, pose: match_to_map(
+        *bev_project(img.astype(jnp.float64) / 255, pitch, roll, seq.camera, grid), m, pose, grid, model.map_dpc,
+        seq.camera.height, jnp.exp(model.log_pitch_gain)))
+    rng = np.random.default_rng(1)
+    for t in (20, 35, 50):
+        truth = np.asarray(seq.planar[t])
+        pitch, roll = seq.pitch_roll[t]
+        start = truth + np.array([*rng.uniform(-1.5, 1.5, 2), np.radians(rng.uniform(-2, 2))])
+        fix = match(seq.images[t], pitch, roll, jnp.asarray(start))
+        assert np.hypot(*(np.asarray(fix.fix[:2]) - truth[:2])) < 0.25
+        assert abs(np.degrees(float(fix.fix[2] - truth[2]))) < 0.6
+        assert float(fix.confidence) > 0.2
+        off = match(seq.images[t], pitch + np.radians(0.3), roll, jnp.asarray(truth))
+        assert np.degrees(float(off.pitch_error)) == pytest.approx(0.3, abs=0.12)
+
+
+def test_bevo_plus_stays_on_the_map_where_odometry_drifts(carla):
+    seq, m = carla.sequence, carla.map
+    model = create_model("carla")
+    assert model.num_learnable() == 29
+    run = eqx.filter_jit(lambda mod, s, mp: mod(s, mp, warm_start=True))
+    out = run(model, seq, m)
+    err = pose_errors(out.poses, seq.planar)
+    assert err["mean_position_error_m"] < 0.25 and err["max_position_error_m"] < 0.6
+    assert err["mean_yaw_error_deg"] < 0.6
+    assert np.asarray(out.accepted).mean() > 0.9
+    odometry = eqx.filter_jit(lambda mod, s: mod(s, warm_start=True))(model.odometry, seq)
+    assert pose_errors(odometry.poses, seq.planar)["final_position_error_m"] > 2 * err["final_position_error_m"]
+    # vmap over sequences sharing the map equals one at a time
+    both = eqx.filter_jit(jax.vmap(lambda mod, s, mp: mod(s, mp, warm_start=True), in_axes=(None, 0, None)))(
+        model, sq.stack([seq, seq]), m)
+    np.testing.assert_allclose(both.poses[1], out.poses, atol=1e-6)
+    with pytest.raises(ValueError, match="map image"):
+        model(seq, Map(m.image[None], m.x_max, m.y_max, m.resolution))
+
+
+def test_off_the_map_or_textureless_it_coasts_and_says_so(carla):
+    """A map that does not cover the drive, or one without texture: no fix is accepted, the
+    filter follows the odometry and its position uncertainty grows."""
+    seq, m = carla.sequence, carla.map
+    model = create_model("carla")
+    run = eqx.filter_jit(lambda mod, s, mp: mod(s, mp, warm_start=True))
+    far = Map(m.image, m.x_max + 5000.0, m.y_max, m.resolution)
+    flat = Map(jnp.full_like(m.image, 128), m.x_max, m.y_max, m.resolution)
+    on_map = run(model, seq, m)
+    for bad in (far, flat):
+        out = run(model, seq, bad)
+        assert not np.any(np.asarray(out.accepted))
+        assert np.all(np.isfinite(np.asarray(out.poses)))
+        assert np.all(np.diff(np.asarray(out.position_std)) > 0)  # it grows every frame
+        assert float(out.position_std[-1]) > 3 * float(on_map.position_std[-1])
+        assert float(np.max(np.asarray(out.confidence))) < model.min_confidence
+        # coasting = the filter's motion (BEVO's dx, dy and the gyro's yaw) composed from the start
+        dead = jax.lax.scan(lambda p, d: (se2_compose(p, d),) * 2, seq.planar[0].astype(out.increments.dtype), out.increments)[1]
+        np.testing.assert_allclose(np.asarray(out.poses[:, :2]), np.asarray(dead[:, :2]), atol=0.05)
+
+
+def test_a_large_initial_pose_error_is_corrected(carla):
+    seq, m = carla.sequence, carla.map
+    model = create_model("carla")
+    start = seq.planar[0] + jnp.array([2.5, -2.0, np.radians(3.0)])
+    out = eqx.filter_jit(lambda mod, s, mp, p: mod(s, mp, p, initial_std=(3.0, 3.0, 0.1), warm_start=True))(model, seq, m, start)
+    err = np.hypot(*(np.asarray(out.poses[:, :2]) - np.asarray(seq.planar[:, :2])).T)
+    assert err[0] < 1.0 and err[-10:].max() < 0.3
+
+
+def test_gradient_of_the_loss_matches_finite_differences(world):
+    """Every learnable leaf of the localizer itself (the odometry's are checked in
+    test_odometry), central differences in float64."""
+    assert jnp.result_type(float) == jnp.float64
+    sc = scene("carla", "town02", "day", "all", seed=2, world=world, frames=8)
+    model = create_model("carla")
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+
+    def loss(p):
+        return localization_loss(eqx.combine(p, static)(sc.sequence, sc.map, warm_start=True), sc.sequence)
+
+    grads = eqx.filter_jit(jax.grad(loss))(params)
+    value = eqx.filter_jit(loss)
+    leaves, treedef = jax.tree_util.tree_flatten(params)
+    grad_leaves = jax.tree_util.tree_leaves(grads)
+    odometry_leaves = {id(x) for x in jax.tree_util.tree_leaves(params.odometry)}
+    assert all(bool(jnp.all(jnp.isfinite(g))) for g in grad_leaves)
+    checked = 0
+    for i, (leaf, g) in enumerate(zip(leaves, grad_leaves)):
+        if id(leaf) in odometry_leaves:
+            continue
+        for j in range(leaf.size):
+            eps = 1e-5
+
+            def shifted(d, i=i, j=j, leaf=leaf):
+                new = list(leaves)
+                new[i] = leaf.reshape(-1).at[j].add(d).reshape(leaf.shape)
+                return float(value(jax.tree_util.tree_unflatten(treedef, new)))
+
+            fd = (shifted(eps) - shifted(-eps)) / (2 * eps)
+            analytic = float(g.reshape(-1)[j])
+            assert abs(fd - analytic) <= 0.03 * max(abs(fd), abs(analytic)) + 1e-8, f"leaf {i}[{j}]: finite difference {fd}, grad {analytic}"
+            checked += 1
+    assert checked == 15
+
+
+def test_scene_parts_follow_the_seed_split(world):
+    whole = scene("aeroground", "town02", "day", "all", seed=3, world=world, frames=40)
+    test = scene("aeroground", "town02", "night", "test", seed=3, world=world, frames=40)
+    assert part_range(40, "train") == (0, 20) and part_range(40, "val") == (20, 30) and part_range(40, "test") == (30, 40)
+    assert test.sequence.num_frames == 10
+    np.testing.assert_allclose(test.sequence.poses, whole.sequence.poses[30:], atol=1e-5)
+    assert abs(float(whole.sequence.camera.height) - 0.8) < 1e-6 and whole.map.resolution == 0.1
+    with pytest.raises(ValueError, match="unknown part"):
+        part_range(40, "holdout")
+    with pytest.raises(ValueError, match="unknown scene kind"):
+        scene("boat", frames=40, world=world)

@@ -44,6 +44,15 @@ def euler_rates(pitch: Array, roll: Array, omega: Float[Array, "... 3"]) -> tupl
     return pitch_dot, roll_dot
 
 
+def gyro_yaw_increment(gyro: Float[Array, "S 3"], pitch: Array, roll: Array, dt: float) -> Float[Array, ""]:
+    """The yaw turned over one block of gyro samples (rad; NaN rows skipped), with the ZYX yaw
+    rate ``(sin(roll) wy + cos(roll) wz) / cos(pitch)`` at a constant ``pitch`` and ``roll``."""
+    ok = jnp.all(jnp.isfinite(gyro), axis=-1)
+    g = jnp.where(ok[:, None], gyro, 0.0)
+    rate = (jnp.sin(roll) * g[:, 1] + jnp.cos(roll) * g[:, 2]) / jnp.cos(pitch)
+    return dt * jnp.sum(rate)
+
+
 def accel_tilt(accel: Float[Array, "... 3"]) -> Float[Array, "... 2"]:
     """``(pitch, roll)`` of a specific-force vector (gravity only: exact)."""
     ax, ay, az = accel[..., 0], accel[..., 1], accel[..., 2]

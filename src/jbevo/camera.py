@@ -23,6 +23,8 @@ import jax.numpy as jnp
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Bool, Float
 
+from jbevo.geometry import wrap_angle
+
 # Body -> camera for a camera looking straight ahead: camera x = -body y, y = -body z, z = body x.
 FORWARD = ((0.0, -1.0, 0.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0))
 
@@ -156,3 +158,25 @@ def bev_project(
     v = jnp.where(valid, v, 0.0)
     bev = map_coordinates(image, [v, u], order=1, mode="nearest")
     return jnp.where(valid, bev, 0.0), valid
+
+
+def bev_increment(grid: BevGrid, rotation: Float[Array, ""], translation: Float[Array, " 2"]) -> Float[Array, " 3"]:
+    """The body-frame motion ``(dx, dy, dyaw)`` from the pose a BEV ``a`` was taken at to the pose
+    of BEV ``b``, given the :func:`jbevo.registration.register` result ``(rotation, translation)``
+    that carries ``a`` onto ``b`` (same ``grid``).
+
+    With ``R = R(dyaw)`` (standard, counter-clockwise), BEV origin ``o`` and image centre ``c``
+    (both ``(col, row)``), and ``S`` the swap of the two axes: ``dyaw = -rotation`` and
+    ``(dx, dy) = resolution * R S (t - (R - I)(c - o))``. A ground point fixed in the world moves
+    in the BEV opposite to the vehicle, and DPC measures turns about the image centre, not about
+    the camera's ground point ``o``; the ``(R - I)(c - o)`` term moves the turn's centre there.
+    """
+    dyaw = -rotation
+    c, s = jnp.cos(dyaw), jnp.sin(dyaw)
+    r = jnp.stack([jnp.stack([c, -s]), jnp.stack([s, c])])
+    rows, cols = grid.shape
+    centre = jnp.array([(cols - 1) / 2, (rows - 1) / 2], translation.dtype)
+    origin = jnp.array([grid.origin[1], grid.origin[0]], translation.dtype)
+    t = translation - (r - jnp.eye(2, dtype=translation.dtype)) @ (centre - origin)
+    d = grid.resolution * r @ t[::-1]  # S swaps (x, y) = (col, row)
+    return jnp.stack([d[0], d[1], wrap_angle(dyaw)])

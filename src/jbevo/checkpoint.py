@@ -1,4 +1,4 @@
-"""BEVO checkpoints: the model's configuration, its learnable leaves, the optimizer state and the
+"""BEVO and BEVO+ checkpoints: the model's configuration, its learnable leaves, the optimizer state and the
 training progress in one file, written atomically.
 
 A checkpoint is a ``.npz`` archive with ``config`` (JSON: what is needed to rebuild the model's
@@ -21,35 +21,58 @@ import numpy as np
 
 from jbevo.camera import BevGrid
 from jbevo.files import write_atomic
+from jbevo.localization import BevoPlus
 from jbevo.odometry import Bevo
 
 FORMAT = 1
 
 
-def model_config(model: Bevo) -> dict:
-    """What rebuilds ``model``'s structure (not its learned values)."""
-    g = model.grid
+def _grid_config(g: BevGrid) -> dict:
+    return {"resolution": g.resolution, "shape": list(g.shape), "origin": list(g.origin)}
+
+
+def _grid(g: dict) -> BevGrid:
+    return BevGrid(g["resolution"], tuple(g["shape"]), tuple(g["origin"]))
+
+
+def model_config(model: Bevo | BevoPlus) -> dict:
+    """What rebuilds ``model``'s structure (not its learned values): a BEVO odometry model or a
+    BEVO+ localizer (``"kind"``)."""
+    if isinstance(model, BevoPlus):
+        return {
+            "format": FORMAT, "kind": "bevo+", "odometry": model_config(model.odometry),
+            "map_grid": _grid_config(model.map_grid), "map_n_angles": model.map_dpc.n_angles,
+            "min_confidence": model.min_confidence, "gate": model.gate, "gyro_yaw": model.gyro_yaw,
+            "reacquire_after": model.reacquire_after,
+        }
     return {
         "format": FORMAT,
-        "grid": {"resolution": g.resolution, "shape": list(g.shape), "origin": list(g.origin)},
+        "kind": "bevo",
+        "grid": _grid_config(model.grid),
         "imu_dt": model.attitude.dt,
         "n_angles": model.dpc.n_angles,
         "attitude_source": model.attitude_source,
+        "gyro_window": model.gyro_window,
     }
 
 
-def model_from_config(config: dict) -> Bevo:
+def model_from_config(config: dict) -> Bevo | BevoPlus:
     """A hand-set model with the structure ``config`` describes."""
     if config.get("format") != FORMAT:
         raise ValueError(f"checkpoint format {config.get('format')} is not {FORMAT}")
-    g = config["grid"]
+    if config.get("kind", "bevo") == "bevo+":
+        return BevoPlus.create(
+            model_from_config(config["odometry"]), _grid(config["map_grid"]), min_confidence=config["min_confidence"],
+            gate=config["gate"], gyro_yaw=config["gyro_yaw"], reacquire_after=config.get("reacquire_after", 5),
+            n_angles=config["map_n_angles"],
+        )
     return Bevo.create(
-        BevGrid(g["resolution"], tuple(g["shape"]), tuple(g["origin"])), config["imu_dt"],
-        config["attitude_source"], n_angles=config["n_angles"],
+        _grid(config["grid"]), config["imu_dt"], config["attitude_source"], config.get("gyro_window", 0.0),
+        n_angles=config["n_angles"],
     )
 
 
-def save(path: str | Path, model: Bevo, opt_state: Any = None, progress: dict | None = None) -> None:
+def save(path: str | Path, model: Bevo | BevoPlus, opt_state: Any = None, progress: dict | None = None) -> None:
     leaves = io.BytesIO()
     eqx.tree_serialise_leaves(leaves, (model, opt_state))
     buffer = io.BytesIO()
@@ -62,7 +85,7 @@ def save(path: str | Path, model: Bevo, opt_state: Any = None, progress: dict | 
     write_atomic(Path(path), lambda f: f.write(buffer.getvalue()), mode="wb")
 
 
-def load(path: str | Path, opt_state_like: Any = None) -> tuple[Bevo, Any, dict]:
+def load(path: str | Path, opt_state_like: Any = None) -> tuple[Bevo | BevoPlus, Any, dict]:
     """``(model, opt_state, progress)`` from ``path``; ``opt_state_like`` is an optimizer state of
     the right structure (``optimizer.init(model params)``), or None to skip it."""
     path = Path(path)

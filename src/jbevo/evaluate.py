@@ -74,7 +74,9 @@ def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str) -
         return Bevo.create(grid, imu_dt, attitude)
     path = path / "best.ckpt" if path.is_dir() else path
     model, _, _ = checkpoint.load(path)
-    return Bevo(model.attitude, model.dpc, model.grid, model.feather, attitude)
+    if not isinstance(model, Bevo):
+        raise SystemExit(f"{path} holds a BEVO+ localizer; evaluate it with python -m jbevo.localize evaluate")
+    return Bevo(model.attitude, model.dpc, model.grid, model.feather, attitude, model.gyro_window)
 
 
 def main(argv: list[str] | None = None) -> int:

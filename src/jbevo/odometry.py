@@ -13,11 +13,8 @@ Per frame ``t`` (:meth:`Bevo.step`):
 3. **DPC.** :func:`jbevo.registration.register` between the previous and the current BEV; the
    resulting forward speed and the accelerometer's lateral tilt update the attitude filter
    (the BEV of this frame used the prediction; the update serves the next frames).
-4. **Metric motion.** With ``R = R(dyaw)`` (standard, counter-clockwise), BEV origin ``o`` and
-   image centre ``c`` (both ``(col, row)``), and ``S`` the swap of the two axes, DPC's
-   ``(rotation, t)`` gives ``dyaw = -rotation`` and the body-frame increment
-   ``(dx, dy) = resolution * R S (t - (R - I)(c - o))`` (derivation in the README's BEVO
-   section; tested against ground truth). Poses compose with :func:`jbevo.geometry.se2_compose`.
+4. **Metric motion.** :func:`jbevo.camera.bev_increment` turns DPC's ``(rotation, t)`` into the
+   body-frame increment ``(dx, dy, dyaw)`` (tested against ground truth). Poses compose with :func:`jbevo.geometry.se2_compose`.
 
 Why speed-aided: the accelerometer's forward axis reads ``dv/dt - g sin(pitch)``, so its tilt is
 off by ``dv/dt / g`` (2 m/s^2: 11.5 deg) whenever the car speeds up or brakes, and the BEV needs
@@ -46,13 +43,21 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jbevo import ukf
-from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt, tilt_measurements
-from jbevo.camera import BevGrid, bev_project
+from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt, gyro_yaw_increment, tilt_measurements
+from jbevo.camera import BevGrid, Camera, bev_increment, bev_project
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
 from jbevo.registration import DPCParams, register
 
 
+
+
+class BevoCarry(NamedTuple):
+    """What the recursion carries from frame to frame."""
+
+    attitude: ukf.GaussianState  #: the speed-aided attitude filter's belief
+    bev: Float[Array, "h w"]  #: the previous frame's (feathered) BEV
+    pose: Float[Array, " 3"]  #: the planar pose (x, y, yaw)
 
 
 class BevoOutput(NamedTuple):
@@ -67,7 +72,10 @@ class Bevo(eqx.Module):
     BEV ``grid``. ``feather`` (pixels) softens the edge of the camera's view in the BEV;
     ``attitude_source`` picks the pitch/roll that project the BEV: ``"filter"`` (BEVO),
     ``"zero"`` (no IMU), ``"accel"`` (the raw accelerometer tilt) or ``"truth"`` (the sequence's
-    ground truth, an upper bound).
+    ground truth, an upper bound). ``gyro_window`` (radians; 0: off) searches DPC's rotation
+    only within that distance of the gyro's yaw increment over the frame
+    (:func:`jbevo.registration.register`'s ``rotation_prior``): no gross rotation outliers on
+    faint, noisy images (night), at the cost of trusting the gyro to that window.
     """
 
     attitude: SpeedAidedAttitude
@@ -75,10 +83,12 @@ class Bevo(eqx.Module):
     grid: BevGrid = eqx.field(static=True)
     feather: int = eqx.field(static=True, default=4)
     attitude_source: str = eqx.field(static=True, default="filter")
+    gyro_window: float = eqx.field(static=True, default=0.0)
 
     @classmethod
     def create(
-        cls, grid: BevGrid | None = None, imu_dt: float = 0.01, attitude_source: str = "filter", **dpc_kwargs
+        cls, grid: BevGrid | None = None, imu_dt: float = 0.01, attitude_source: str = "filter",
+        gyro_window: float = 0.0, **dpc_kwargs,
     ) -> Bevo:
         """Hand-set defaults: :meth:`SpeedAidedAttitude.create` and DPC's defaults with 256
         angles."""
@@ -87,7 +97,7 @@ class Bevo(eqx.Module):
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
         dpc_kwargs.setdefault("n_angles", 256)
         return cls(
-            SpeedAidedAttitude.create(imu_dt), DPCParams(**dpc_kwargs), grid, 4, attitude_source
+            SpeedAidedAttitude.create(imu_dt), DPCParams(**dpc_kwargs), grid, 4, attitude_source, float(gyro_window)
         )
 
     def num_learnable(self) -> int:
@@ -95,25 +105,63 @@ class Bevo(eqx.Module):
         leaves = jax.tree_util.tree_leaves(eqx.filter(self, eqx.is_inexact_array))
         return sum(int(x.size) for x in leaves)
 
-    # ------------------------------------------------------------------ pieces of a step
-    def _bev(self, image, pitch, roll, camera) -> Array:
-        bev, valid = bev_project(image.astype(pitch.dtype) * (1.0 / 255.0), pitch, roll, camera, self.grid)
-        weight = _feathered(valid.astype(bev.dtype), self.feather)
-        mean = jnp.sum(bev * valid) / jnp.maximum(jnp.sum(valid), 1.0)
-        return mean + weight * (bev - mean)
+    def start(
+        self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False
+    ) -> tuple[BevoCarry, tuple, Sequence]:
+        """The recursion's initial carry, the per-frame inputs to scan over and the sequence cast
+        to the working dtype (float32, or float64 under ``jax_enable_x64``); see :meth:`__call__`."""
+        if seq.images.ndim != 3:
+            raise ValueError(f"Bevo runs on one sequence (images (T, H, W)); got images {seq.images.shape}: use jax.vmap")
+        if initial_pose is None:
+            initial_pose = jnp.nan_to_num(seq.planar[0])
+        dtype = jnp.result_type(float)
+        seq = eqx.tree_at(lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype)))
+        first = jnp.where(jnp.isfinite(seq.accel[0]), seq.accel[0], 0.0).mean(0)
+        tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, accel_tilt(first), 0.0)
+        speed0 = jnp.zeros((), dtype)
+        if warm_start:
+            tilt0 = seq.pitch_roll[0]
+            speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / self.frame_dt(seq)
+        mean = jnp.concatenate([tilt0, jnp.zeros(3, dtype), speed0[None]]).astype(dtype)
+        cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * 3 + [0.1**2], dtype))
+        carry = BevoCarry(ukf.GaussianState(mean, cov), jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype))
+        frames = (seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
+        return carry, frames, seq
 
-    def _increment(self, rotation, translation) -> Float[Array, " 3"]:
-        dyaw = -rotation
-        c, s = jnp.cos(dyaw), jnp.sin(dyaw)
-        r = jnp.array([[c, -s], [s, c]])
-        rows, cols = self.grid.shape
-        centre = jnp.array([(cols - 1) / 2, (rows - 1) / 2], translation.dtype)
-        origin = jnp.array([self.grid.origin[1], self.grid.origin[0]], translation.dtype)
-        t = translation - (r - jnp.eye(2)) @ (centre - origin)
-        d = self.grid.resolution * r @ t[::-1]  # S swaps (x, y) = (col, row)
-        return jnp.stack([d[0], d[1], wrap_angle(dyaw)])
+    def frame_dt(self, seq: Sequence) -> float:
+        """Seconds between frames: the IMU interval times the samples per frame."""
+        return self.attitude.dt * seq.gyro.shape[-2]
 
-    # ------------------------------------------------------------------ the recursion
+    def step(self, carry: BevoCarry, frame: tuple, camera: Camera, frame_dt: float) -> tuple[BevoCarry, tuple]:
+        """One frame of the recursion (module docstring): ``frame`` is one slice of the inputs
+        :meth:`start` returns. Returns the new carry and ``(increment, pitch_roll, confidence,
+        pose)``."""
+        state, prev_bev, pose = carry
+        image, gyro, accel, truth, index = frame
+        dtype = prev_bev.dtype
+        predicted = self.attitude.predict(state, gyro, accel)
+        pitch_roll = {
+            "filter": predicted.mean[:2].astype(dtype),
+            "zero": jnp.zeros(2, dtype),
+            "accel": jnp.nan_to_num(tilt_measurements(accel[None])[0]).astype(dtype),
+            "truth": truth,
+        }[self.attitude_source]
+        bev = feathered_bev(image, pitch_roll[0], pitch_roll[1], camera, self.grid, self.feather)
+        if self.gyro_window > 0:
+            bias = predicted.mean[2:5].astype(dtype)
+            turn = gyro_yaw_increment(gyro - bias, pitch_roll[0], pitch_roll[1], self.attitude.dt)
+            reg = register(prev_bev, bev, self.dpc, rotation_prior=-turn, prior_window=self.gyro_window)
+        else:
+            reg = register(prev_bev, bev, self.dpc)
+        new_inc = jnp.where(index > 0, bev_increment(self.grid, reg.rotation, reg.translation), 0.0)
+        speed = jnp.where(index > 0, new_inc[0] / frame_dt, jnp.nan)
+        state = self.attitude.update(predicted, gyro, accel, speed)
+        pose = se2_compose(pose, new_inc)
+        confidence = jnp.where(index > 0, reg.confidence, 0.0)
+        # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
+        new_carry = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), BevoCarry(state, bev, pose), carry)
+        return new_carry, (new_inc, pitch_roll, confidence, pose)
+
     def __call__(
         self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False
     ) -> BevoOutput:
@@ -126,49 +174,33 @@ class Bevo(eqx.Module):
         before: a window cut from the middle of a drive (training) may begin in a turn, where the
         uncompensated tilt is off by the centripetal acceleration (3 m/s^2: 18 degrees).
         """
-        if seq.images.ndim != 3:
-            raise ValueError(f"Bevo runs on one sequence (images (T, H, W)); got images {seq.images.shape}: use jax.vmap")
-        if initial_pose is None:
-            initial_pose = jnp.nan_to_num(seq.planar[0])
-        dtype = jnp.result_type(float)  # float32, or float64 under jax_enable_x64
-        seq = eqx.tree_at(lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype)))
-        frame_dt = self.attitude.dt * seq.gyro.shape[1]
-        first = jnp.where(jnp.isfinite(seq.accel[0]), seq.accel[0], 0.0).mean(0)
-        tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, accel_tilt(first), 0.0)
-        speed0 = jnp.zeros((), dtype)
-        if warm_start:
-            tilt0 = seq.pitch_roll[0]
-            speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / frame_dt
-        mean = jnp.concatenate([tilt0, jnp.zeros(3, dtype), speed0[None]]).astype(dtype)
-        cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * 3 + [0.1**2], dtype))
-        h, w = self.grid.shape
-        carry0 = (ukf.GaussianState(mean, cov), jnp.zeros((h, w), dtype), initial_pose.astype(dtype))
+        carry0, frames, seq = self.start(seq, initial_pose, warm_start)
+        frame_dt = self.frame_dt(seq)
 
         @jax.checkpoint
         def step(carry, frame):
-            state, prev_bev, pose = carry
-            image, gyro, accel, truth, index = frame
-            predicted = self.attitude.predict(state, gyro, accel)
-            pitch_roll = {
-                "filter": predicted.mean[:2].astype(dtype),
-                "zero": jnp.zeros(2, dtype),
-                "accel": jnp.nan_to_num(tilt_measurements(accel[None])[0]).astype(dtype),
-                "truth": truth,
-            }[self.attitude_source]
-            bev = self._bev(image, pitch_roll[0], pitch_roll[1], seq.camera)
-            reg = register(prev_bev, bev, self.dpc)
-            new_inc = jnp.where(index > 0, self._increment(reg.rotation, reg.translation), 0.0)
-            speed = jnp.where(index > 0, new_inc[0] / frame_dt, jnp.nan)
-            state = self.attitude.update(predicted, gyro, accel, speed)
-            pose = se2_compose(pose, new_inc)
-            confidence = jnp.where(index > 0, reg.confidence, 0.0)
-            # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
-            new_carry = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), (state, bev, pose), carry)
-            return new_carry, (new_inc, pitch_roll, confidence, pose)
+            return self.step(carry, frame, seq.camera, frame_dt)
 
-        frames = (seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         _, (increments, pitch_roll, confidence, poses) = jax.lax.scan(step, carry0, frames)
         return BevoOutput(increments, pitch_roll, confidence, poses)
+
+
+def feathered_bev(
+    image: Array, pitch: Array, roll: Array, camera: Camera, grid: BevGrid, feather: int
+) -> Float[Array, "h w"]:
+    """The BEV of an 8-bit ``image`` (intensities in [0, 1]) with the pixels outside the camera's
+    view at the mean of the valid ones and the view's edge feathered over ``feather`` pixels."""
+    bev, valid = bev_project(image.astype(pitch.dtype) * (1.0 / 255.0), pitch, roll, camera, grid)
+    return feather_to_mean(bev, valid, feather)
+
+
+def feather_to_mean(image: Float[Array, "h w"], valid: Array, feather: int) -> Float[Array, "h w"]:
+    """``mean + w (image - mean)``, the mean over ``valid`` pixels and ``w`` the feathered
+    ``valid`` mask: invalid pixels fade to the mean."""
+    valid = valid.astype(image.dtype)
+    weight = _feathered(valid, feather)
+    mean = jnp.sum(image * valid) / jnp.maximum(jnp.sum(valid), 1.0)
+    return mean + weight * (image - mean)
 
 
 def _feathered(valid: Float[Array, "H W"], width: int) -> Float[Array, "H W"]:
@@ -212,4 +244,4 @@ def motion_loss(
     return loss
 
 
-__all__ = ["Bevo", "BevoOutput", "motion_loss", "relative_motion"]
+__all__ = ["Bevo", "BevoCarry", "BevoOutput", "feather_to_mean", "feathered_bev", "motion_loss", "relative_motion"]

@@ -248,13 +248,16 @@ def _log_domain_weights(local: Array, temperature: Array) -> tuple[Array, Array]
     return jnp.exp(jnp.log(ratio) / temperature), peak
 
 
-def soft_argmax_1d(c: Float[Array, " N"], temperature: Array, half_width: int) -> tuple[Array, Array]:
-    """Sub-sample peak of a periodic signal: the log-domain centroid around the integer peak.
+def soft_argmax_1d(
+    c: Float[Array, " N"], temperature: Array, half_width: int, allowed: Array | None = None
+) -> tuple[Array, Array]:
+    """Sub-sample peak of a periodic signal: the log-domain centroid around the integer peak
+    (the largest among the ``allowed`` samples, if given).
 
     Returns ``(position in [0, N), peak value)``.
     """
     n = c.shape[0]
-    k = jnp.argmax(c)
+    k = jnp.argmax(c if allowed is None else jnp.where(allowed, c, -jnp.inf))
     d = jnp.arange(-half_width, half_width + 1)
     weight, peak = _log_domain_weights(jnp.take(c, (k + d) % n), temperature)
     offset = jnp.sum(weight * d) / jnp.sum(weight)
@@ -309,10 +312,12 @@ def _translation_from(fa: Array, fb: Array, shape: tuple[int, int], params: DPCP
 
 
 def estimate_rotation(
-    a: Float[Array, "H W"], b: Float[Array, "H W"], params: DPCParams
+    a: Float[Array, "H W"], b: Float[Array, "H W"], params: DPCParams, prior: Array | None = None, window: float = 0.0
 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """Rotation of ``b`` relative to ``a`` modulo 180 degrees, in ``[-pi/2, pi/2)``, and the angle
-    peak's confidence. ``a`` and ``b`` must already be windowed (:func:`windowed`)."""
+    peak's confidence. ``a`` and ``b`` must already be windowed (:func:`windowed`). With a
+    ``prior`` rotation, the peak is searched within ``window`` radians of it (modulo 180
+    degrees) only."""
     pa = log_polar_spectrum(a, params)
     pb = log_polar_spectrum(b, params)
     radii = _radii(params, a.dtype)
@@ -329,7 +334,12 @@ def estimate_rotation(
     corr = jnp.fft.irfft(_whiten(cross, floor) * lowpass, n=n)
     ideal = (jnp.sum(_gaussian_lowpass(jnp.fft.fftfreq(n, dtype=a.dtype), sigma)) - 1.0) / n
     temperature = jnp.exp(params.log_angle_temperature).astype(a.dtype)
-    pos, peak = soft_argmax_1d(corr, temperature, params.peak_half_width)
+    if prior is None:
+        pos, peak = soft_argmax_1d(corr, temperature, params.peak_half_width)
+    else:
+        bins = jnp.arange(n, dtype=a.dtype) - prior.astype(a.dtype) * (n / jnp.pi)
+        near = jnp.abs(_signed(bins, n)) <= window * (n / jnp.pi)
+        pos, peak = soft_argmax_1d(corr, temperature, params.peak_half_width, near)
     rotation = _signed(pos, n) * (jnp.pi / n)
     return rotation, jnp.clip(peak / ideal, 0.0, 1.0)
 
@@ -350,16 +360,16 @@ def _check_finite(image: Array, name: str) -> Array:
     return eqx.error_if(image, ~jnp.all(jnp.isfinite(image)), f"register: image {name} contains NaN or inf")
 
 
-def _checked_batched(fn, a, b, params: DPCParams | None):
+def _checked_batched(fn, a, b, params: DPCParams | None, *per_pair):
     """Check the shapes, promote to a float dtype, default the parameters, and vmap ``fn(a, b,
-    params)`` over the leading batch axes."""
+    params, *per_pair)`` over the leading batch axes (``per_pair``: arrays with those axes)."""
     params = DPCParams() if params is None else params
     a, b = jnp.asarray(a), jnp.asarray(b)
     _check_pair(a, b)
     dtype = jnp.result_type(a.dtype, b.dtype, jnp.float32)
     for _ in range(a.ndim - 2):
-        fn = jax.vmap(fn, in_axes=(0, 0, None))
-    return fn(a.astype(dtype), b.astype(dtype), params)
+        fn = jax.vmap(fn, in_axes=(0, 0, None) + (0,) * len(per_pair))
+    return fn(a.astype(dtype), b.astype(dtype), params, *per_pair)
 
 
 def register_translation(
@@ -381,7 +391,8 @@ def _register_translation_pair(a, b, params):
 
 
 def register(
-    a: Float[Array, "*batch H W"], b: Float[Array, "*batch H W"], params: DPCParams | None = None
+    a: Float[Array, "*batch H W"], b: Float[Array, "*batch H W"], params: DPCParams | None = None,
+    rotation_prior: Float[Array, "*batch"] | None = None, prior_window: float = np.radians(2.0),
 ) -> Registration:
     """Rotation (radians, ``[-pi, pi)``), translation ``(x, y)`` (pixels) and confidence that carry
     image ``a`` onto image ``b``; leading batch axes are vmapped.
@@ -391,10 +402,33 @@ def register(
     ``confidence`` is the height of the chosen translation peak relative to a perfect match: about
     1 for identical content, about 0 for unrelated or featureless images.
 
+    With a ``rotation_prior`` (radians; e.g. a gyro's turn between two frames), the rotation is
+    searched within ``prior_window`` of it only, and the candidate 180 degrees away is never
+    taken: a faint or noisy image (night) then cannot produce a gross rotation outlier, and one
+    translation correlation instead of two makes it faster.
+
     Raises ``ValueError`` for shapes that are not ``(..., H, W)`` alike with ``H, W >= 16``; a NaN or
     inf in either image raises at run time (also under ``jit``).
     """
-    return _checked_batched(_register_pair, a, b, params)
+    if rotation_prior is None:
+        return _checked_batched(_register_pair, a, b, params)
+    prior = jnp.asarray(rotation_prior)
+    if prior.shape != jnp.shape(a)[:-2]:
+        raise ValueError(f"rotation_prior must have the batch shape {jnp.shape(a)[:-2]}, got {prior.shape}")
+    return _checked_batched(lambda x, y, p, r: _register_pair_prior(x, y, p, r, prior_window), a, b, params, prior)
+
+
+def _register_pair_prior(a, b, params, prior, window) -> Registration:
+    a, b = _check_finite(a, "a"), _check_finite(b, "b")
+    win = disk_window(a.shape, params.window_taper, a.dtype)
+    wa, wb = windowed(a, win), windowed(b, win)
+    half_turn, _ = estimate_rotation(wa, wb, params, prior, window)
+    # The candidate (half_turn or half_turn + pi) nearest the prior.
+    flip = jnp.abs(wrap_angle(half_turn - prior)) > jnp.pi / 2
+    turned = rotate_image(wa, half_turn)
+    turned = jnp.where(flip, turned[::-1, ::-1], turned)
+    t, c = _translation_from(jnp.fft.rfft2(turned), jnp.fft.rfft2(wb), a.shape, params)
+    return Registration(wrap_angle(jnp.where(flip, half_turn + jnp.pi, half_turn)), t, c)
 
 
 def _register_pair(a, b, params) -> Registration:

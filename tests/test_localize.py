@@ -1,0 +1,46 @@
+"""The BEVO+ command line: train a few steps on a tiny scene, resume, evaluate, and clear errors."""
+
+import json
+
+import pytest
+
+from jbevo import checkpoint
+from jbevo.localize import main
+
+
+def test_train_resume_and_evaluate(tmp_path, capsys):
+    out = tmp_path / "run"
+    small = ["--kind", "aeroground", "--frames", "48", "--seed", "2"]
+    assert main(["train", *small, "--window", "12", "--batch", "2", "--epochs", "1", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "29 learnable parameters" in text and "validation after training" in text
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["epochs"] == 1 and metrics["after"]["mean_position_error_m"] < 1.0
+    assert (out / "best.ckpt").is_file() and (out / "last.ckpt").is_file()
+    assert main(["train", *small, "--window", "12", "--batch", "2", "--epochs", "2", "--out", str(out), "--resume"]) == 0
+    assert "resumed" in capsys.readouterr().out
+    assert checkpoint.load(out / "last.ckpt")[2]["epoch"] == 2
+
+    ev = tmp_path / "eval"
+    assert main(["evaluate", *small, "--checkpoint", str(out), "--conditions", "day", "night", "--out", str(ev)]) == 0
+    result = json.loads((ev / "metrics.json").read_text())
+    assert len(result["scenes"]) == 2 and result["frames_per_s"] > 0
+    for entry in result["scenes"].values():
+        assert set(entry) >= {"BEVO+", "BEVO odometry", "map matching alone"}
+        assert entry["BEVO+"]["mean_position_error_m"] < 1.0
+    name = next(iter(result["scenes"]))
+    assert (ev / "plots" / f"{name}.png").is_file() and (ev / "poses" / f"{name}_bevo_plus.txt").is_file()
+
+
+def test_errors(tmp_path):
+    bad = tmp_path / "bad.ckpt"
+    bad.write_bytes(b"nope")
+    with pytest.raises(SystemExit, match="not a readable jbevo checkpoint"):
+        main(["evaluate", "--frames", "16", "--checkpoint", str(bad), "--out", str(tmp_path / "e")])
+    from jbevo.odometry import Bevo
+
+    checkpoint.save(tmp_path / "odo.ckpt", Bevo.create())
+    with pytest.raises(SystemExit, match="not a BEVO\\+ localizer"):
+        main(["evaluate", "--frames", "16", "--checkpoint", str(tmp_path / "odo.ckpt"), "--out", str(tmp_path / "e")])
+    with pytest.raises(SystemExit, match="fewer than --window"):
+        main(["train", "--frames", "16", "--window", "64", "--epochs", "1", "--out", str(tmp_path / "t")])
