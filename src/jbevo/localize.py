@@ -27,7 +27,6 @@ driven and, for BEVO+, the fraction of accepted map fixes.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
@@ -36,7 +35,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from tqdm import tqdm
 
 from jbevo import checkpoint
 from jbevo.camera import bev_project
@@ -45,6 +43,7 @@ from jbevo.datasets.conditions import CONDITIONS
 from jbevo.datasets.maps import Map
 from jbevo.datasets.scenes import SCENE_KINDS, scene
 from jbevo.datasets.world import TOWNS, World
+from jbevo.epochs import make_step, run_epoch
 from jbevo.files import write_json_atomic
 from jbevo.localization import BevoPlus, localization_loss, match_to_map
 from jbevo.odometry import Bevo
@@ -137,39 +136,21 @@ def train(args) -> int:
     if seq.num_frames < args.window:
         raise SystemExit(f"the training part has {seq.num_frames} frames, fewer than --window {args.window}")
     windows = sq.windows(seq, args.window, args.window // 2)
-    n_windows = windows.frame_times.shape[0]
     map_ = train_scene.map
 
-    @eqx.filter_jit
-    def train_step(params, opt_state, batch):
-        def loss_fn(p):
-            m = eqx.combine(p, static)
-            out = jax.vmap(lambda s: m(s, map_, warm_start=True))(batch)
-            return jnp.mean(jax.vmap(lambda o, s: localization_loss(o, s, args.yaw_weight))(out, batch))
+    def loss(m, batch):
+        out = jax.vmap(lambda s: m(s, map_, warm_start=True))(batch)
+        return jnp.mean(jax.vmap(lambda o, s: localization_loss(o, s, args.yaw_weight))(out, batch))
 
-        loss, grads = jax.value_and_grad(loss_fn)(params)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return optax.apply_updates(params, updates), opt_state, loss
-
+    step = make_step(static, optimizer, loss)
     rng = np.random.default_rng(args.seed + progress["epoch"])
-    steps = max(1, n_windows // args.batch)
     for epoch in range(progress["epoch"], args.epochs):
-        order = rng.permutation(n_windows)
-        bar = tqdm(range(steps), desc=f"epoch {epoch + 1}/{args.epochs}", file=sys.stdout, leave=False)
-        losses = []
-        for i in bar:
-            idx = order[i * args.batch : (i + 1) * args.batch]
-            batch = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows)
-            params, opt_state, loss = train_step(params, opt_state, batch)
-            if not np.isfinite(float(loss)):
-                raise SystemExit(f"the loss became {float(loss)} at epoch {epoch + 1}, step {i}; lower --lr")
-            losses.append(float(loss))
-            bar.set_postfix(loss=f"{np.mean(losses[-10:]):.5f}")
+        params, opt_state, mean_loss, steps = run_epoch(step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}")
         model = eqx.combine(params, static)
         val = validate(model, val_scene.sequence, val_scene.map)
         progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
-        progress["history"].append({"epoch": epoch + 1, "loss": float(np.mean(losses)), **{f"val_{k}": v for k, v in val.items()}})
-        print(f"epoch {epoch + 1}: loss {np.mean(losses):.5f}  val mean {val['mean_position_error_m']:.3f} m  "
+        progress["history"].append({"epoch": epoch + 1, "loss": mean_loss, **{f"val_{k}": v for k, v in val.items()}})
+        print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  val mean {val['mean_position_error_m']:.3f} m  "
               f"max {val['max_position_error_m']:.3f} m  yaw {val['mean_yaw_error_deg']:.3f} deg")
         best = progress["best_mean_position_error_m"]
         if best is None or val["mean_position_error_m"] < best:

@@ -43,7 +43,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jbevo import ukf
-from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt, gyro_yaw_increment, tilt_measurements
+from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements
 from jbevo.camera import BevGrid, Camera, bev_increment, bev_project
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
@@ -120,10 +120,20 @@ class Bevo(eqx.Module):
         tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, accel_tilt(first), 0.0)
         speed0 = jnp.zeros((), dtype)
         if warm_start:
-            tilt0 = seq.pitch_roll[0]
-            speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / self.frame_dt(seq)
+            # The state before frame 0's IMU block (the frame before): frame 0's truth moved back
+            # through the block's mean rates; the speed is the forward difference (its value half
+            # a frame on) moved back by one and a half frames of acceleration.
+            dt = self.frame_dt(seq)
+            gyro0 = jnp.where(jnp.isfinite(seq.gyro[0]), seq.gyro[0], 0.0).mean(0)
+            truth0 = seq.pitch_roll[0]
+            tilt0 = truth0 - dt * jnp.stack(euler_rates(truth0[0], truth0[1], gyro0))
+            accel_x = jnp.where(jnp.isfinite(seq.accel[0, :, 0]), seq.accel[0, :, 0], 0.0).mean()
+            speed_dot = accel_x + GRAVITY * jnp.sin(truth0[0])
+            speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / dt - 1.5 * dt * speed_dot
         mean = jnp.concatenate([tilt0, jnp.zeros(3, dtype), speed0[None]]).astype(dtype)
-        cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * 3 + [0.1**2], dtype))
+        # Cold: the first tilt is ~1.7 deg uncertain; warm: pitch and roll are known (0.1 deg).
+        tilt_std = 0.002 if warm_start else 0.03
+        cov = jnp.diag(jnp.asarray([tilt_std**2] * 2 + [0.005**2] * 3 + [0.1**2], dtype))
         carry = BevoCarry(ukf.GaussianState(mean, cov), jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype))
         frames = (seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         return carry, frames, seq
@@ -170,8 +180,8 @@ class Bevo(eqx.Module):
 
         Cold start (default): pitch and roll start at the tilt of the first accelerometer block
         and the speed at zero, right when a drive starts at rest. ``warm_start`` starts from the
-        ground truth's pitch, roll and speed at frame 0 instead, as if the filter had run
-        before: a window cut from the middle of a drive (training) may begin in a turn, where the
+        ground truth's pitch, roll and speed at frame 0 instead (moved back through frame 0's IMU
+        block, which the first step integrates), as if the filter had run before: a window cut from the middle of a drive (training) may begin in a turn, where the
         uncompensated tilt is off by the centripetal acceleration (3 m/s^2: 18 degrees).
         """
         carry0, frames, seq = self.start(seq, initial_pose, warm_start)

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import sys
 import time
 from pathlib import Path
 
@@ -29,13 +28,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from tqdm import tqdm
 
 from jbevo import checkpoint
 from jbevo.camera import BevGrid
 from jbevo.datasets import sequence as sq
 from jbevo.datasets.catalog import DATASETS, load_sequences
 from jbevo.datasets.world import TOWNS
+from jbevo.epochs import make_step, run_epoch
 from jbevo.files import write_json_atomic
 from jbevo.odometry import Bevo, motion_loss
 from jbevo.odometry_metrics import SHORT_SEGMENTS, score, segment_lengths
@@ -140,40 +139,22 @@ def main(argv: list[str] | None = None) -> int:
     before = validate(Bevo.create(model.grid, imu_dt), val_seqs, lengths, args.val_window)
     _print_metrics("validation before training (hand-set)", before)
     windows = training_windows(train_seqs, args.window)
-    n_windows = windows.frame_times.shape[0]
 
-    @eqx.filter_jit
-    def train_step(params, opt_state, batch):
-        def loss_fn(p):
-            m = eqx.combine(p, static)
-            # Windows start mid-drive: warm-started from the truth at their first frame, as if
-            # the filter had run before (see Bevo.__call__).
-            out = jax.vmap(lambda q: m(q, warm_start=True))(batch)
-            return jnp.mean(jax.vmap(lambda o, s: motion_loss(o, s, args.yaw_weight))(out, batch))
+    def loss(m, batch):
+        # Windows start mid-drive: warm-started from the truth at their first frame, as if the
+        # filter had run before (see Bevo.__call__).
+        out = jax.vmap(lambda q: m(q, warm_start=True))(batch)
+        return jnp.mean(jax.vmap(lambda o, s: motion_loss(o, s, args.yaw_weight))(out, batch))
 
-        loss, grads = jax.value_and_grad(loss_fn)(params)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        return optax.apply_updates(params, updates), opt_state, loss
-
+    step = make_step(static, optimizer, loss)
     rng = np.random.default_rng(args.seed + progress["epoch"])
-    steps = max(1, n_windows // args.batch)
     for epoch in range(progress["epoch"], args.epochs):
-        order = rng.permutation(n_windows)
-        bar = tqdm(range(steps), desc=f"epoch {epoch + 1}/{args.epochs}", file=sys.stdout, leave=False)
-        losses = []
-        for i in bar:
-            idx = order[i * args.batch : (i + 1) * args.batch]
-            batch = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows)
-            params, opt_state, loss = train_step(params, opt_state, batch)
-            if not np.isfinite(float(loss)):
-                raise SystemExit(f"the loss became {float(loss)} at epoch {epoch + 1}, step {i}; lower --lr")
-            losses.append(float(loss))
-            bar.set_postfix(loss=f"{np.mean(losses[-10:]):.5f}")
+        params, opt_state, mean_loss, steps = run_epoch(step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}")
         model = eqx.combine(params, static)
         val = validate(model, val_seqs, lengths, args.val_window)
         progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
-        progress["history"].append({"epoch": epoch + 1, "loss": float(np.mean(losses)), "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]})
-        print(f"epoch {epoch + 1}: loss {np.mean(losses):.5f}  val t_err {val['t_err_pct']:.3f} %  ATE {val['ate_m']:.3f} m")
+        progress["history"].append({"epoch": epoch + 1, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]})
+        print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  val t_err {val['t_err_pct']:.3f} %  ATE {val['ate_m']:.3f} m")
         criterion = val["t_err_pct"] if val["segments"] else val["ate_m"]
         if progress["best_t_err_pct"] is None or criterion < progress["best_t_err_pct"]:
             progress["best_t_err_pct"] = criterion
