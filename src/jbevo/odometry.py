@@ -116,15 +116,21 @@ class Bevo(eqx.Module):
             initial_pose = jnp.nan_to_num(seq.planar[0])
         dtype = jnp.result_type(float)
         seq = eqx.tree_at(lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype)))
+        # The state the first step starts from is the one before frame 0's IMU block (a frame
+        # earlier): the first step integrates that block to reach frame 0.
+        dt = self.frame_dt(seq)
+        gyro0 = jnp.where(jnp.isfinite(seq.gyro[0]), seq.gyro[0], 0.0).mean(0)
         first = jnp.where(jnp.isfinite(seq.accel[0]), seq.accel[0], 0.0).mean(0)
-        tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, accel_tilt(first), 0.0)
+        # Cold: the tilt of the block's mean force is the tilt half a block back; move it back
+        # another half block.
+        tilt_mid = accel_tilt(first)
+        tilt0 = tilt_mid - 0.5 * dt * jnp.stack(euler_rates(tilt_mid[0], tilt_mid[1], gyro0))
+        tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, tilt0, 0.0)
         speed0 = jnp.zeros((), dtype)
         if warm_start:
-            # The state before frame 0's IMU block (the frame before): frame 0's truth moved back
-            # through the block's mean rates; the speed is the forward difference (its value half
-            # a frame on) moved back by one and a half frames of acceleration.
-            dt = self.frame_dt(seq)
-            gyro0 = jnp.where(jnp.isfinite(seq.gyro[0]), seq.gyro[0], 0.0).mean(0)
+            # Frame 0's truth moved back through the block's mean rates; the speed is the forward
+            # difference (its value half a frame on) moved back by one and a half frames of
+            # acceleration.
             truth0 = seq.pitch_roll[0]
             tilt0 = truth0 - dt * jnp.stack(euler_rates(truth0[0], truth0[1], gyro0))
             accel_x = jnp.where(jnp.isfinite(seq.accel[0, :, 0]), seq.accel[0, :, 0], 0.0).mean()
