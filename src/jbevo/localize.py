@@ -34,7 +34,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from jbevo import checkpoint
 from jbevo.camera import bev_project
@@ -43,7 +42,7 @@ from jbevo.datasets.conditions import CONDITIONS
 from jbevo.datasets.maps import Map
 from jbevo.datasets.scenes import SCENE_KINDS, scene
 from jbevo.datasets.world import TOWNS, World
-from jbevo.epochs import make_step, run_epoch
+from jbevo.epochs import make_step, run_epoch, save_epoch, start_run
 from jbevo.files import write_json_atomic
 from jbevo.localization import BevoPlus, localization_loss, match_to_map
 from jbevo.odometry import Bevo
@@ -115,18 +114,8 @@ def train(args) -> int:
     frames = args.frames or None
     train_scene = scene(args.kind, args.town, args.condition, "train", args.seed, world, frames)
     val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames)
-    model = create_model(args.kind)
-    optimizer = optax.chain(optax.clip_by_global_norm(args.clip), optax.adam(args.lr))
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-    opt_state = optimizer.init(params)
-    progress = {"epoch": 0, "step": 0, "best_mean_position_error_m": None, "history": []}
-    args.out.mkdir(parents=True, exist_ok=True)
-    if args.resume:
-        model, opt_state, progress = checkpoint.load(args.out / "last.ckpt", opt_state)
-        if not isinstance(model, BevoPlus):
-            raise SystemExit(f"{args.out / 'last.ckpt'} is not a BEVO+ checkpoint")
-        params, static = eqx.partition(model, eqx.is_inexact_array)
-        print(f"resumed from {args.out / 'last.ckpt'} at epoch {progress['epoch']}")
+    model, params, static, optimizer, opt_state, progress = start_run(
+        create_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m")
     print(f"BEVO+: {model.num_learnable()} learnable parameters; {args.kind} scene in {args.town} ({args.condition}): "
           f"{train_scene.sequence.num_frames} training and {val_scene.sequence.num_frames} validation frames")
     before = validate(create_model(args.kind), val_scene.sequence, val_scene.map)
@@ -152,11 +141,7 @@ def train(args) -> int:
         progress["history"].append({"epoch": epoch + 1, "loss": mean_loss, **{f"val_{k}": v for k, v in val.items()}})
         print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  val mean {val['mean_position_error_m']:.3f} m  "
               f"max {val['max_position_error_m']:.3f} m  yaw {val['mean_yaw_error_deg']:.3f} deg")
-        best = progress["best_mean_position_error_m"]
-        if best is None or val["mean_position_error_m"] < best:
-            progress["best_mean_position_error_m"] = val["mean_position_error_m"]
-            checkpoint.save(args.out / "best.ckpt", model, opt_state, progress)
-        checkpoint.save(args.out / "last.ckpt", model, opt_state, progress)
+        save_epoch(args.out, model, opt_state, progress, "best_mean_position_error_m", val["mean_position_error_m"])
 
     best_model = checkpoint.load(args.out / "best.ckpt")[0] if (args.out / "best.ckpt").is_file() else model
     after = validate(best_model, val_scene.sequence, val_scene.map)

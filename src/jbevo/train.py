@@ -27,14 +27,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 
 from jbevo import checkpoint
 from jbevo.camera import BevGrid
 from jbevo.datasets import sequence as sq
 from jbevo.datasets.catalog import DATASETS, load_sequences
 from jbevo.datasets.world import TOWNS
-from jbevo.epochs import make_step, run_epoch
+from jbevo.epochs import make_step, run_epoch, save_epoch, start_run
 from jbevo.files import write_json_atomic
 from jbevo.odometry import Bevo, motion_loss
 from jbevo.odometry_metrics import SHORT_SEGMENTS, score, segment_lengths
@@ -123,16 +122,9 @@ def main(argv: list[str] | None = None) -> int:
         lengths = SHORT_SEGMENTS
     imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
     res, size, near = args.grid
-    model = Bevo.create(BevGrid(res, (int(size), int(size)), near=near), imu_dt)
-    optimizer = optax.chain(optax.clip_by_global_norm(args.clip), optax.adam(args.lr))
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-    opt_state = optimizer.init(params)
-    progress = {"epoch": 0, "step": 0, "best_t_err_pct": None, "history": []}
-    args.out.mkdir(parents=True, exist_ok=True)
-    if args.resume:
-        model, opt_state, progress = checkpoint.load(args.out / "last.ckpt", opt_state)
-        params, static = eqx.partition(model, eqx.is_inexact_array)
-        print(f"resumed from {args.out / 'last.ckpt'} at epoch {progress['epoch']}")
+    model, params, static, optimizer, opt_state, progress = start_run(
+        Bevo.create(BevGrid(res, (int(size), int(size)), near=near), imu_dt), args.out, args.lr, args.clip, args.resume,
+        "best_t_err_pct")
     print(f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
           f"({args.dataset}); segment lengths {list(lengths)} m")
 
@@ -156,10 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         progress["history"].append({"epoch": epoch + 1, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]})
         print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  val t_err {val['t_err_pct']:.3f} %  ATE {val['ate_m']:.3f} m")
         criterion = val["t_err_pct"] if val["segments"] else val["ate_m"]
-        if progress["best_t_err_pct"] is None or criterion < progress["best_t_err_pct"]:
-            progress["best_t_err_pct"] = criterion
-            checkpoint.save(args.out / "best.ckpt", model, opt_state, progress)
-        checkpoint.save(args.out / "last.ckpt", model, opt_state, progress)
+        save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion)
 
     best, _, _ = checkpoint.load(args.out / "best.ckpt") if (args.out / "best.ckpt").is_file() else (model, None, None)
     after = validate(best, val_seqs, lengths, args.val_window)
