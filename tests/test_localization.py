@@ -1,11 +1,19 @@
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
+from leaf_gradients import check_leaf_gradients
 
 from jbevo import ukf
+from jbevo.camera import bev_project
 from jbevo.datasets import sequence as sq
+from jbevo.datasets.maps import Map
+from jbevo.datasets.scenes import SCENE_KINDS, part_range, scene
+from jbevo.datasets.world import World
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
-from jbevo.localization import planar_pose_model
+from jbevo.localization import BevoPlus, localization_loss, map_crop, match_to_map, planar_pose_model
+from jbevo.localize import create_model, pose_errors
 
 
 def kitti_planar(path):
@@ -48,16 +56,6 @@ def test_fuses_real_kitti_motion_better_than_odometry_or_fixes_alone(reference_d
 
 
 # ----------------------------------------------------------------------------- BEVO+ on the map
-
-from jbevo.camera import bev_project  # noqa: E402
-from jbevo.datasets.maps import Map  # noqa: E402
-from jbevo.datasets.scenes import SCENE_KINDS, part_range, scene  # noqa: E402
-from jbevo.datasets.world import World  # noqa: E402
-from jbevo.localization import BevoPlus, localization_loss, map_crop, match_to_map  # noqa: E402
-from jbevo.localize import create_model, pose_errors  # noqa: E402
-
-import equinox as eqx  # noqa: E402
-import pytest  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -178,26 +176,7 @@ def test_gradient_of_the_loss_matches_finite_differences(world):
 
     grads = eqx.filter_jit(jax.grad(loss))(params)
     value = eqx.filter_jit(loss)
-    leaves, treedef = jax.tree_util.tree_flatten(params)
-    grad_leaves = jax.tree_util.tree_leaves(grads)
-    odometry_leaves = {id(x) for x in jax.tree_util.tree_leaves(params.odometry)}
-    assert all(bool(jnp.all(jnp.isfinite(g))) for g in grad_leaves)
-    checked = 0
-    for i, (leaf, g) in enumerate(zip(leaves, grad_leaves)):
-        if id(leaf) in odometry_leaves:
-            continue
-        for j in range(leaf.size):
-            eps = 1e-5
-
-            def shifted(d, i=i, j=j, leaf=leaf):
-                new = list(leaves)
-                new[i] = leaf.reshape(-1).at[j].add(d).reshape(leaf.shape)
-                return float(value(jax.tree_util.tree_unflatten(treedef, new)))
-
-            fd = (shifted(eps) - shifted(-eps)) / (2 * eps)
-            analytic = float(g.reshape(-1)[j])
-            assert abs(fd - analytic) <= 0.03 * max(abs(fd), abs(analytic)) + 1e-8, f"leaf {i}[{j}]: finite difference {fd}, grad {analytic}"
-            checked += 1
+    checked = check_leaf_gradients(value, grads, params, abs_tol=1e-8, skip=jax.tree_util.tree_leaves(params.odometry))
     assert checked == 15
 
 

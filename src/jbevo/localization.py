@@ -54,11 +54,11 @@ from jaxtyping import Array, Bool, Float
 
 from jbevo import ukf
 from jbevo.attitude import gyro_yaw_increment
-from jbevo.camera import BevGrid, bev_increment, bev_project
+from jbevo.camera import BevGrid, Camera, bev_increment, bev_project
 from jbevo.datasets.maps import Map
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_compose, wrap_angle
-from jbevo.odometry import Bevo, feather_to_mean, feathered_bev
+from jbevo.odometry import Bevo, feather_to_mean, feathered_bev, num_learnable, planar_huber
 from jbevo.registration import DPCParams, disk_window, register, register_translation
 from jbevo.ukf import StateSpaceModel
 from jbevo.unscented import circular_mean_fn, wrapped_add_fn, wrapped_residual_fn
@@ -253,24 +253,33 @@ class BevoPlus(eqx.Module):
 
     def num_learnable(self) -> int:
         """Number of learnable scalars."""
-        leaves = jax.tree_util.tree_leaves(eqx.filter(self, eqx.is_inexact_array))
-        return sum(int(x.size) for x in leaves)
+        return num_learnable(self)
+
+    def confidence_scale(self, confidence: Float[Array, ""]) -> Float[Array, ""]:
+        """``c ** -exp(log_confidence_power)`` with ``c`` floored at ``min_confidence``: how much
+        a noise standard deviation grows for a match of confidence ``c``."""
+        return jnp.maximum(confidence, self.min_confidence) ** -jnp.exp(self.log_confidence_power)
 
     def motion_covariance(self, confidence: Float[Array, ""]) -> Float[Array, "3 3"]:
         """``Q(c)``: the per-frame odometry noise, ``exp(motion_log_std)`` scaled by the odometry
         DPC's confidence ``c`` to the power ``-exp(log_confidence_power)`` (a faint image, a weak
         odometry match: a looser motion model)."""
-        c = jnp.maximum(confidence, self.min_confidence)
-        std = jnp.exp(self.motion_log_std) * c ** -jnp.exp(self.log_confidence_power)
-        return jnp.diag(std**2)
+        return jnp.diag((jnp.exp(self.motion_log_std) * self.confidence_scale(confidence)) ** 2)
 
     def fix_covariance(self, yaw: Float[Array, ""], confidence: Float[Array, ""]) -> Float[Array, "3 3"]:
         """``R(c)``: the body-frame fix noise turned into the world frame at ``yaw``."""
-        c = jnp.maximum(confidence, self.min_confidence)
-        std = jnp.exp(self.fix_log_std) * c ** -jnp.exp(self.log_confidence_power)
+        std = jnp.exp(self.fix_log_std) * self.confidence_scale(confidence)
         cy, sy = jnp.cos(yaw), jnp.sin(yaw)
-        rot = jnp.stack([jnp.stack([cy, -sy, 0 * cy]), jnp.stack([sy, cy, 0 * cy]), jnp.stack([0 * cy, 0 * cy, 1 + 0 * cy])])
+        rot = jnp.eye(3, dtype=std.dtype).at[:2, :2].set(jnp.stack([jnp.stack([cy, -sy]), jnp.stack([sy, cy])]))
         return rot @ jnp.diag(std**2) @ rot.T
+
+    def match(self, image: Array, pitch_roll: Float[Array, " 2"], camera: Camera, map_: Map, pose: Float[Array, " 3"]) -> MapMatch:
+        """Project an 8-bit ``image`` on the map-matching grid at ``pitch_roll`` and match it
+        against the map at ``pose`` (:func:`match_to_map` with this model's parameters)."""
+        bev, valid = bev_project(image.astype(pose.dtype) * (1.0 / 255.0), pitch_roll[0], pitch_roll[1], camera, self.map_grid)
+        return match_to_map(
+            bev, valid, map_, pose, self.map_grid, self.map_dpc, camera.height, jnp.exp(self.log_pitch_gain), self.map_feather
+        )
 
     def __call__(
         self,
@@ -306,11 +315,7 @@ class BevoPlus(eqx.Module):
                 inc = inc.at[2].set(jnp.where(index > 0, turn, 0.0))
             moved = ukf.predict(model, state, inc, q)
             predicted = jax.tree_util.tree_map(lambda a, b: jnp.where(index > 0, a, b), moved, state)
-            bev, valid = bev_project(image.astype(dtype) * (1.0 / 255.0), pitch_roll[0], pitch_roll[1], seq.camera, self.map_grid)
-            match = match_to_map(
-                bev, valid, map_, predicted.mean, self.map_grid, self.map_dpc, seq.camera.height,
-                jnp.exp(self.log_pitch_gain), self.map_feather,
-            )
+            match = self.match(image, pitch_roll, seq.camera, map_, predicted.mean)
             r = self.fix_covariance(match.fix[YAW], match.confidence).astype(dtype)
             # Normalised innovation squared: the model's measurement is the state itself, so S = P + R.
             innovation = jnp.concatenate([match.fix[:2] - predicted.mean[:2], wrap_angle(match.fix[2:] - predicted.mean[2:])])
@@ -331,7 +336,7 @@ class BevoPlus(eqx.Module):
             filtered = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), filtered, state)
             # The map measures the pitch the BEV was projected with minus the true one: a linear
             # measurement of the attitude filter's pitch, which sets the BEV of the next frames.
-            pitch_std = jnp.exp(self.pitch_log_std) * jnp.maximum(match.confidence, self.min_confidence) ** -jnp.exp(self.log_confidence_power)
+            pitch_std = jnp.exp(self.pitch_log_std) * self.confidence_scale(match.confidence)
             attitude = _measure_pitch(odo_carry.attitude, pitch_roll[0] - match.pitch_error, pitch_std, accept)
             odo_carry = odo_carry._replace(attitude=jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), attitude, odo_carry.attitude))
             if odo.attitude_source == "filter":
@@ -363,11 +368,7 @@ def localization_loss(
     """Mean Huber loss of the filtered pose error ``e = |d(x, y)|^2 + (yaw_weight * d yaw)^2``
     (metres; ``yaw_weight`` metres per radian), quadratic below ``huber`` metres and linear
     above, over all frames: the robot's location (and heading) as supervision."""
-    truth = seq.planar
-    err = output.poses - truth
-    sq_err = err[:, 0] ** 2 + err[:, 1] ** 2 + (yaw_weight * wrap_angle(err[:, 2])) ** 2
-    norm = jnp.sqrt(sq_err + 1e-12)
-    return jnp.mean(jnp.where(norm <= huber, 0.5 * sq_err, huber * (norm - 0.5 * huber)))
+    return jnp.mean(planar_huber(output.poses - seq.planar, yaw_weight, huber))
 
 
 __all__ = [

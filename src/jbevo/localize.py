@@ -36,7 +36,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo import checkpoint
-from jbevo.camera import bev_project
 from jbevo.datasets import sequence as sq
 from jbevo.datasets.conditions import CONDITIONS
 from jbevo.datasets.maps import Map
@@ -44,7 +43,7 @@ from jbevo.datasets.scenes import SCENE_KINDS, scene
 from jbevo.datasets.world import TOWNS, World
 from jbevo.epochs import make_step, run_epoch, save_epoch, start_run
 from jbevo.files import write_json_atomic
-from jbevo.localization import BevoPlus, localization_loss, match_to_map
+from jbevo.localization import BevoPlus, localization_loss
 from jbevo.odometry import Bevo
 from jbevo.plots import trajectory_top_view
 from jbevo.trajectory_io import write_kitti
@@ -83,10 +82,7 @@ def map_matching_alone(model: BevoPlus, seq: sq.Sequence, map_: Map) -> jax.Arra
     def step(carry, frame):
         odo_carry, pose = carry
         odo_carry, (_, pitch_roll, _, _) = odo.step(odo_carry, frame, seq.camera, frame_dt)
-        image = frame[0].astype(pose.dtype) * (1.0 / 255.0)
-        bev, valid = bev_project(image, pitch_roll[0], pitch_roll[1], seq.camera, model.map_grid)
-        match = match_to_map(bev, valid, map_, pose, model.map_grid, model.map_dpc, seq.camera.height,
-                             jnp.exp(model.log_pitch_gain), model.map_feather)
+        match = model.match(frame[0], pitch_roll, seq.camera, map_, pose)
         ok = (match.confidence >= model.min_confidence) & jnp.all(jnp.isfinite(match.fix))
         pose = jnp.where(ok, match.fix, pose).astype(pose.dtype)
         return (odo_carry, pose), pose

@@ -102,8 +102,7 @@ class Bevo(eqx.Module):
 
     def num_learnable(self) -> int:
         """Number of learnable scalars."""
-        leaves = jax.tree_util.tree_leaves(eqx.filter(self, eqx.is_inexact_array))
-        return sum(int(x.size) for x in leaves)
+        return num_learnable(self)
 
     def start(
         self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False
@@ -234,6 +233,20 @@ def _box(image, k):
     return jax.vmap(lambda c: jnp.convolve(c, k, mode="same"), in_axes=1, out_axes=1)(image)
 
 
+def planar_huber(err: Float[Array, "N 3"], yaw_weight: float, huber: float) -> Float[Array, " N"]:
+    """Huber loss of planar errors ``(dx, dy, dyaw)``: with ``e = dx^2 + dy^2 + (yaw_weight *
+    wrap(dyaw))^2`` (metres), ``e / 2`` below ``huber^2`` and ``huber (sqrt(e) - huber / 2)``
+    above."""
+    sq_err = err[:, 0] ** 2 + err[:, 1] ** 2 + (yaw_weight * wrap_angle(err[:, 2])) ** 2
+    norm = jnp.sqrt(sq_err + 1e-12)
+    return jnp.where(norm <= huber, 0.5 * sq_err, huber * (norm - 0.5 * huber))
+
+
+def num_learnable(module: eqx.Module) -> int:
+    """Number of learnable scalars (inexact array leaves) of a model."""
+    return sum(int(x.size) for x in jax.tree_util.tree_leaves(eqx.filter(module, eqx.is_inexact_array)))
+
+
 def relative_motion(seq: Sequence) -> Float[Array, "T 3"]:
     """Ground-truth increments ``(dx, dy, dyaw)`` from frame t-1 to t (zero for frame 0)."""
     planar = seq.planar
@@ -249,15 +262,10 @@ def motion_loss(
     ``e / 2`` below ``huber^2`` and linear in ``sqrt(e)`` above, so that a few gross registration
     failures do not drown the gradient of the many good frames. Plus ``trajectory_weight`` times
     the mean squared position error of the accumulated poses."""
-    truth = relative_motion(seq)
-    err = output.increments - truth
-    sq_err = err[1:, 0] ** 2 + err[1:, 1] ** 2 + (yaw_weight * wrap_angle(err[1:, 2])) ** 2
-    norm = jnp.sqrt(sq_err + 1e-12)
-    per_frame = jnp.where(norm <= huber, 0.5 * sq_err, huber * (norm - 0.5 * huber))
-    loss = jnp.mean(per_frame)
+    loss = jnp.mean(planar_huber(output.increments[1:] - relative_motion(seq)[1:], yaw_weight, huber))
     if trajectory_weight:
         loss = loss + trajectory_weight * jnp.mean(jnp.sum((output.poses[:, :2] - seq.planar[:, :2]) ** 2, -1))
     return loss
 
 
-__all__ = ["Bevo", "BevoCarry", "BevoOutput", "feather_to_mean", "feathered_bev", "motion_loss", "relative_motion"]
+__all__ = ["Bevo", "BevoCarry", "BevoOutput", "feather_to_mean", "feathered_bev", "num_learnable", "planar_huber", "motion_loss", "relative_motion"]
