@@ -26,6 +26,17 @@ def test_round_trip_keeps_values_structure_and_optimizer_state(tmp_path):
     assert int(back_state[0].count) == 0
 
 
+def test_round_trip_keeps_the_band_geometry(tmp_path):
+    model = Bevo.create(cam.BevGrid(0.2, (32, 32), near=6.0), bands=True)
+    model = eqx.tree_at(lambda m: m.bands.log_yaw_gain, model, jnp.float32(0.5))
+    checkpoint.save(tmp_path / "b.ckpt", model)
+    back, _, _ = checkpoint.load(tmp_path / "b.ckpt")
+    assert back.bands is not None and float(back.bands.log_yaw_gain) == pytest.approx(0.5)
+    plain = tmp_path / "plain.ckpt"
+    checkpoint.save(plain, Bevo.create(cam.BevGrid(0.2, (32, 32), near=6.0)))
+    assert checkpoint.load(plain)[0].bands is None
+
+
 def test_errors_name_the_file(tmp_path):
     with pytest.raises(FileNotFoundError, match="no checkpoint"):
         checkpoint.load(tmp_path / "missing.ckpt")

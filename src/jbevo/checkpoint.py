@@ -53,6 +53,7 @@ def model_config(model: Bevo | BevoPlus) -> dict:
         "n_angles": model.dpc.n_angles,
         "attitude_source": model.attitude_source,
         "gyro_window": model.gyro_window,
+        "bands": model.bands is not None,
     }
 
 
@@ -68,7 +69,7 @@ def model_from_config(config: dict) -> Bevo | BevoPlus:
         )
     return Bevo.create(
         _grid(config["grid"]), config["imu_dt"], config["attitude_source"], config.get("gyro_window", 0.0),
-        n_angles=config["n_angles"],
+        bands=config.get("bands", False), n_angles=config["n_angles"],
     )
 
 

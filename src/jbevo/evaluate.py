@@ -69,14 +69,16 @@ def run_many(model: Bevo, seqs: list[sq.Sequence], warm_start: bool = False) -> 
     return outputs, frames / seconds
 
 
-def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str) -> Bevo:
+def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str, bands: bool = False) -> Bevo:
+    """The hand-set model (``path`` None) or a checkpoint's (a file, or a folder's best.ckpt; its
+    own grid and bands), projecting with ``attitude``."""
     if path is None:
-        return Bevo.create(grid, imu_dt, attitude)
+        return Bevo.create(grid, imu_dt, attitude, bands=bands)
     path = path / "best.ckpt" if path.is_dir() else path
     model, _, _ = checkpoint.load(path)
     if not isinstance(model, Bevo):
         raise SystemExit(f"{path} holds a BEVO+ localizer; evaluate it with python -m jbevo.localize evaluate")
-    return Bevo(model.attitude, model.dpc, model.grid, model.feather, attitude, model.gyro_window)
+    return Bevo(model.attitude, model.dpc, model.grid, model.feather, attitude, model.gyro_window, model.bands)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -92,6 +94,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--attitude", choices=("filter", "zero", "accel", "truth"), default="filter", help="pitch/roll for the BEV")
     p.add_argument("--warm-start", action="store_true", help="start from the truth's attitude and speed")
     p.add_argument("--grid", type=float, nargs=3, default=(0.1, 128, 7.5), metavar=("RES", "SIZE", "NEAR"))
+    p.add_argument("--bands", action="store_true", help="hand-set model with the band geometry (jbevo.bands; a checkpoint brings its own)")
     p.add_argument("--out", type=Path, default=Path("runs/evaluation"))
     args = p.parse_args(argv)
 
@@ -109,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     lengths = segment_lengths(args.dataset, args.frames)
     imu_dt = seqs[0].imu_dt if np.isfinite(seqs[0].imu_dt) else 0.01
     res, size, near = args.grid
-    model = load_model(args.checkpoint, BevGrid(res, (int(size), int(size)), near=near), imu_dt, args.attitude)
+    model = load_model(args.checkpoint, BevGrid(res, (int(size), int(size)), near=near), imu_dt, args.attitude, args.bands)
     outputs, fps = run_many(model, seqs, args.warm_start)
 
     (args.out / "poses").mkdir(parents=True, exist_ok=True)
@@ -131,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
           f"ATE {overall['ate_m']:.3f} m  {fps:.0f} frames/s on {len(jax.local_devices())} device(s)")
     write_json_atomic(args.out / "metrics.json", {
         "overall": overall, "per_sequence": per_sequence, "segment_lengths_m": list(lengths),
-        "checkpoint": str(args.checkpoint) if args.checkpoint else None, "attitude": args.attitude,
+        "checkpoint": str(args.checkpoint) if args.checkpoint else None, "attitude": args.attitude, "bands": model.bands is not None,
         "warm_start": args.warm_start, "devices": [str(d) for d in jax.local_devices()],
     })
     print(f"wrote {args.out}")

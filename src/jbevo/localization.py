@@ -49,7 +49,6 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from jbevo import ukf
@@ -59,7 +58,8 @@ from jbevo.datasets.maps import Map
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_compose, wrap_angle
 from jbevo.odometry import Bevo, feather_to_mean, feathered_bev, num_learnable, planar_huber
-from jbevo.registration import DPCParams, disk_window, register, register_translation
+from jbevo.bands import band_moments, register_bands
+from jbevo.registration import DPCParams, register
 from jbevo.ukf import StateSpaceModel
 from jbevo.unscented import circular_mean_fn, wrapped_add_fn, wrapped_residual_fn
 
@@ -130,19 +130,6 @@ class MapMatch(NamedTuple):
     pitch_error: Float[Array, ""]  #: the BEV's pitch minus the true pitch (radians)
 
 
-def _band_moments(grid: BevGrid, taper: float) -> tuple[float, float]:
-    """``E[x^2]`` over the far (top) and near (bottom) halves of ``grid`` under DPC's disk
-    window: the ground distances the two band registrations measure at (numpy, trace time)."""
-    rows, cols = grid.shape
-    half = rows // 2
-    with jax.ensure_compile_time_eval():
-        window = np.asarray(disk_window((half, cols), taper))
-    x = (grid.origin[0] - np.arange(rows)) * grid.resolution
-    weights = window.sum(1)
-    moment = lambda xs: float(np.sum(weights * xs**2) / np.sum(weights))  # noqa: E731
-    return moment(x[:half]), moment(x[half : 2 * half])
-
-
 def match_to_map(
     bev: Float[Array, "h w"], valid: Bool[Array, "h w"], map_: Map, pose: Float[Array, " 3"], grid: BevGrid,
     params: DPCParams, height: Float[Array, ""], pitch_gain: Float[Array, ""] | float = 1.0, feather: int = 2,
@@ -173,13 +160,10 @@ def match_to_map(
     both2 = valid & inside2
     crop_w = feather_to_mean(crop2, both2, feather)
     bev_w = feather_to_mean(bev, both2, feather)
-    half = grid.shape[0] // 2
-    shift, band_conf = register_translation(
-        jnp.stack([crop_w[:half], crop_w[half : 2 * half]]), jnp.stack([bev_w[:half], bev_w[half : 2 * half]]), params
-    )
+    shift, band_conf = register_bands(crop_w, bev_w, params)
     forward = grid.resolution * shift[:, 1]  # rows run backwards along x: +1 row shift = +resolution forward
     lateral = grid.resolution * shift[:, 0]
-    far_m2, near_m2 = _band_moments(grid, params.window_taper)
+    far_m2, near_m2 = band_moments(grid, params.window_taper, 2)
     h = jnp.asarray(height, forward.dtype)
     pitch_error = pitch_gain * (forward[0] - forward[1]) * h / (far_m2 - near_m2)
     residual = jnp.stack([forward[1] - pitch_error * (near_m2 + h**2) / h, 0.5 * (lateral[0] + lateral[1]), 0.0 * h])
@@ -307,7 +291,7 @@ class BevoPlus(eqx.Module):
         def step(carry, frame):
             odo_carry, state, streak = carry
             image, index = frame[0], frame[-1]
-            odo_carry, (inc, pitch_roll, odo_conf, odo_pose) = odo.step(odo_carry, frame, seq.camera, frame_dt)
+            odo_carry, (inc, pitch_roll, odo_conf, odo_pose) = odo.step(odo_carry, frame, seq.camera, frame_dt, reproject=False)
             q = self.motion_covariance(odo_conf).astype(dtype)
             if self.gyro_yaw:
                 bias = odo_carry.attitude.mean[2:5]
@@ -341,9 +325,13 @@ class BevoPlus(eqx.Module):
             odo_carry = odo_carry._replace(attitude=jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), attitude, odo_carry.attitude))
             if odo.attitude_source == "filter":
                 # The next odometry match compares this frame's BEV with the next one: project it
-                # again with the corrected pitch, or a correction would look like a jump.
-                pitch = jnp.where(accept, attitude.mean[0], pitch_roll[0]).astype(dtype)
-                odo_bev = feathered_bev(image, pitch, pitch_roll[1], seq.camera, odo.grid, odo.feather)
+                # again with the corrected pitch (with bands: the updated attitude), or a
+                # correction would look like a jump.
+                if odo.bands is None:
+                    pitch, roll = jnp.where(accept, attitude.mean[0], pitch_roll[0]), pitch_roll[1]
+                else:
+                    pitch, roll = attitude.mean[0], attitude.mean[1]
+                odo_bev = feathered_bev(image, pitch.astype(dtype), roll.astype(dtype), seq.camera, odo.grid, odo.feather)
                 odo_carry = odo_carry._replace(bev=odo_bev.astype(odo_carry.bev.dtype))
             std = jnp.sqrt(jnp.maximum(filtered.cov[0, 0] + filtered.cov[1, 1], zero))
             out = (filtered.mean, filtered.cov, match.fix, match.confidence.astype(dtype), accept, reacquire, std, odo_pose, inc)

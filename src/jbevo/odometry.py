@@ -16,6 +16,12 @@ Per frame ``t`` (:meth:`Bevo.step`):
 4. **Metric motion.** :func:`jbevo.camera.bev_increment` turns DPC's ``(rotation, t)`` into the
    body-frame increment ``(dx, dy, dyaw)`` (tested against ground truth). Poses compose with :func:`jbevo.geometry.se2_compose`.
 
+With ``bands`` (:mod:`jbevo.bands`; for KITTI-size images), step 3 also registers the near and
+far halves of the BEV pair: their forward-shift slope updates the filter's pitch and pitch-rate
+bias before the odometry's speed does, the forward motion is extrapolated to where a pitch error
+has no effect, the rotation is corrected by the bands' lateral shifts (a roll error's false
+turn), and this frame's image is projected again with the updated attitude for the next frame.
+
 Why speed-aided: the accelerometer's forward axis reads ``dv/dt - g sin(pitch)``, so its tilt is
 off by ``dv/dt / g`` (2 m/s^2: 11.5 deg) whenever the car speeds up or brakes, and the BEV needs
 pitch to a few hundredths of a degree (a pitch error ``d`` scales the BEV's apparent motion by
@@ -29,8 +35,8 @@ filter's speed-pitch correlation corrects toward the truth.
 Output per frame (:class:`BevoOutput`): the increment from the previous frame (``(dx, dy, dyaw)``,
 zero for frame 0), pitch, roll (the filter's prediction the BEV used), DPC confidence and the
 planar pose. The learnable parameters are the attitude filter's Q (6) and R (2) (log standard
-deviations) and DPC's six: 14; the camera comes with each sequence (its calibration) and the BEV
-grid is static.
+deviations) and DPC's six: 14, plus the bands' two (the slope's noise and the yaw gain); the
+camera comes with each sequence (its calibration) and the BEV grid is static.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from jaxtyping import Array, Float
 
 from jbevo import ukf
 from jbevo.attitude import GRAVITY, SpeedAidedAttitude, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements
+from jbevo.bands import BIAS_Y, BandGeometry
 from jbevo.camera import BevGrid, Camera, bev_increment, bev_project
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
@@ -75,7 +82,10 @@ class Bevo(eqx.Module):
     ground truth, an upper bound). ``gyro_window`` (radians; 0: off) searches DPC's rotation
     only within that distance of the gyro's yaw increment over the frame
     (:func:`jbevo.registration.register`'s ``rotation_prior``): no gross rotation outliers on
-    faint, noisy images (night), at the cost of trusting the gyro to that window.
+    faint, noisy images (night), at the cost of trusting the gyro to that window. ``bands``
+    (:class:`jbevo.bands.BandGeometry`, or None: off) refines each frame with the near and far
+    halves of the BEV pair: a measurement of the pitch and the pitch-rate bias, the forward
+    motion free of the pitch error, and the yaw free of the roll error.
     """
 
     attitude: SpeedAidedAttitude
@@ -84,20 +94,22 @@ class Bevo(eqx.Module):
     feather: int = eqx.field(static=True, default=4)
     attitude_source: str = eqx.field(static=True, default="filter")
     gyro_window: float = eqx.field(static=True, default=0.0)
+    bands: BandGeometry | None = None
 
     @classmethod
     def create(
         cls, grid: BevGrid | None = None, imu_dt: float = 0.01, attitude_source: str = "filter",
-        gyro_window: float = 0.0, **dpc_kwargs,
+        gyro_window: float = 0.0, bands: bool = False, **dpc_kwargs,
     ) -> Bevo:
-        """Hand-set defaults: :meth:`SpeedAidedAttitude.create` and DPC's defaults with 256
-        angles."""
+        """Hand-set defaults: :meth:`SpeedAidedAttitude.create`, DPC's defaults with 256
+        angles, and with ``bands`` :meth:`BandGeometry.create`."""
         if attitude_source not in ("filter", "zero", "accel", "truth"):
             raise ValueError(f"attitude_source must be filter, zero, accel or truth, got {attitude_source!r}")
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
         dpc_kwargs.setdefault("n_angles", 256)
         return cls(
-            SpeedAidedAttitude.create(imu_dt), DPCParams(**dpc_kwargs), grid, 4, attitude_source, float(gyro_window)
+            SpeedAidedAttitude.create(imu_dt), DPCParams(**dpc_kwargs), grid, 4, attitude_source, float(gyro_window),
+            BandGeometry.create() if bands else None,
         )
 
     def num_learnable(self) -> int:
@@ -147,10 +159,15 @@ class Bevo(eqx.Module):
         """Seconds between frames: the IMU interval times the samples per frame."""
         return self.attitude.dt * seq.gyro.shape[-2]
 
-    def step(self, carry: BevoCarry, frame: tuple, camera: Camera, frame_dt: float) -> tuple[BevoCarry, tuple]:
+    def step(
+        self, carry: BevoCarry, frame: tuple, camera: Camera, frame_dt: float, reproject: bool = True
+    ) -> tuple[BevoCarry, tuple]:
         """One frame of the recursion (module docstring): ``frame`` is one slice of the inputs
         :meth:`start` returns. Returns the new carry and ``(increment, pitch_roll, confidence,
-        pose)``."""
+        pose)``. With ``bands`` and the filter's attitude, the carried BEV is this frame's image
+        projected again with the updated attitude (the next frame's pitch then differs from it by
+        the gyro only); ``reproject=False`` leaves that to a caller that updates the attitude
+        further (BEVO+)."""
         state, prev_bev, pose = carry
         image, gyro, accel, truth, index = frame
         dtype = prev_bev.dtype
@@ -168,11 +185,25 @@ class Bevo(eqx.Module):
             reg = register(prev_bev, bev, self.dpc, rotation_prior=-turn, prior_window=self.gyro_window)
         else:
             reg = register(prev_bev, bev, self.dpc)
-        new_inc = jnp.where(index > 0, bev_increment(self.grid, reg.rotation, reg.translation), 0.0)
-        speed = jnp.where(index > 0, new_inc[0] / frame_dt, jnp.nan)
+        rotation, translation = reg.rotation, reg.translation
+        moving = index > 0
+        filtered = self.attitude_source == "filter"
+        if self.bands is not None:
+            height = jnp.asarray(camera.height, dtype)
+            shifts = self.bands.shifts(prev_bev, bev, reg, self.grid, self.dpc)
+            measured = predicted
+            if filtered:
+                measured = self.bands.update_attitude(predicted, shifts, self.grid, self.dpc, height, frame_dt, moving)
+            drift = (predicted.mean[BIAS_Y] - measured.mean[BIAS_Y]) * frame_dt
+            rotation, translation = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift.astype(dtype))
+            predicted = measured
+        new_inc = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
+        speed = jnp.where(moving, new_inc[0] / frame_dt, jnp.nan)
         state = self.attitude.update(predicted, gyro, accel, speed)
+        if self.bands is not None and filtered and reproject:
+            bev = feathered_bev(image, state.mean[0].astype(dtype), state.mean[1].astype(dtype), camera, self.grid, self.feather)
         pose = se2_compose(pose, new_inc)
-        confidence = jnp.where(index > 0, reg.confidence, 0.0)
+        confidence = jnp.where(moving, reg.confidence, 0.0)
         # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
         new_carry = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), BevoCarry(state, bev, pose), carry)
         return new_carry, (new_inc, pitch_roll, confidence, pose)

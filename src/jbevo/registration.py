@@ -160,9 +160,9 @@ def windowed(image: Float[Array, "H W"], window: Float[Array, "H W"]) -> Float[A
     return (image - mean) * window
 
 
-def rotate_image(image: Float[Array, "H W"], angle: Float[Array, ""]) -> Float[Array, "H W"]:
+def rotate_image(image: Float[Array, "H W"], angle: Float[Array, ""], fill: Array | float = 0.0) -> Float[Array, "H W"]:
     """``image`` turned by ``angle`` about its centre (positive: counter-clockwise as displayed),
-    bilinear, zero outside."""
+    bilinear, ``fill`` outside."""
     h, w = image.shape
     y = jnp.arange(h, dtype=image.dtype) - (h - 1) / 2
     x = jnp.arange(w, dtype=image.dtype) - (w - 1) / 2
@@ -171,7 +171,7 @@ def rotate_image(image: Float[Array, "H W"], angle: Float[Array, ""]) -> Float[A
     px = c * x[None, :] - s * y[:, None]
     py = s * x[None, :] + c * y[:, None]
     coords = [py + (h - 1) / 2, px + (w - 1) / 2]
-    return map_coordinates(image, coords, order=1, mode="constant", cval=0.0)
+    return map_coordinates(image - fill, coords, order=1, mode="constant", cval=0.0) + fill
 
 
 def _safe_norm(re: Array, im: Array) -> Array:

@@ -108,6 +108,7 @@ def parse_args(argv):
     p.add_argument("--clip", type=float, default=1.0, help="global gradient-norm clip")
     p.add_argument("--yaw-weight", type=float, default=10.0, help="metres per radian of yaw error in the loss")
     p.add_argument("--grid", type=float, nargs=3, default=(0.1, 128, 7.5), metavar=("RES", "SIZE", "NEAR"), help="BEV metres/pixel, pixels, nearest metres")
+    p.add_argument("--bands", action="store_true", help="refine each frame with the BEV's near and far bands (jbevo.bands; KITTI-size images)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, default=Path("runs/bevo"))
     p.add_argument("--resume", action="store_true", help="continue from OUT/last.ckpt")
@@ -123,12 +124,13 @@ def main(argv: list[str] | None = None) -> int:
     imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
     res, size, near = args.grid
     model, params, static, optimizer, opt_state, progress = start_run(
-        Bevo.create(BevGrid(res, (int(size), int(size)), near=near), imu_dt), args.out, args.lr, args.clip, args.resume,
+        Bevo.create(BevGrid(res, (int(size), int(size)), near=near), imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume,
         "best_t_err_pct")
     print(f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
           f"({args.dataset}); segment lengths {list(lengths)} m")
 
-    before = validate(Bevo.create(model.grid, imu_dt), val_seqs, lengths, args.val_window)
+    hand_set = Bevo.create(model.grid, imu_dt, bands=model.bands is not None)
+    before = validate(hand_set, val_seqs, lengths, args.val_window)
     _print_metrics("validation before training (hand-set)", before)
     windows = training_windows(train_seqs, args.window)
 
@@ -155,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     _print_metrics("validation after training (best checkpoint)", after)
     whole = {}
     if args.val_window:
-        whole = {"hand_set": validate(Bevo.create(model.grid, imu_dt), val_seqs, lengths), "learned": validate(best, val_seqs, lengths)}
+        whole = {"hand_set": validate(hand_set, val_seqs, lengths), "learned": validate(best, val_seqs, lengths)}
         _print_metrics("whole validation sequences from a cold start, hand-set", whole["hand_set"])
         _print_metrics("whole validation sequences from a cold start, learned", whole["learned"])
     write_json_atomic(args.out / "metrics.json", {
