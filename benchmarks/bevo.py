@@ -2,7 +2,8 @@
 (0.1 m/px, 4-29.6 m ahead): inference frames per second (sequences vmapped, one jitted call),
 training frames per second (value and gradient of the motion loss over windows of 64 frames,
 ``jax.checkpoint`` per frame) and the compiled training step's peak memory (XLA's memory
-analysis: arguments + temporaries + outputs), for one window of 64 frames.
+analysis: arguments + temporaries + outputs), for one window of 64 frames; for BEVO with the band
+geometry (``jbevo.bands``, the top-level keys) and without (``without_bands``).
 
     python benchmarks/bevo.py [--sequences 4] [--frames 64] [--repeats 3]
 
@@ -31,6 +32,34 @@ from jbevo.odometry import Bevo, motion_loss
 from timing import best_seconds
 
 
+def measure(model: Bevo, batch, window, repeats: int) -> dict:
+    """Inference frames/s over the vmapped ``batch``, training frames/s and the compiled training
+    step's memory over one ``window``."""
+    sequences, frames = batch.images.shape[:2]
+    infer = eqx.filter_jit(jax.vmap(lambda m, s: m(s), in_axes=(None, 0)))
+    seconds = best_seconds(lambda: infer(model, batch), repeats)
+    inference_fps = sequences * frames / seconds
+    print(f"  inference: {inference_fps:.1f} frames/s ({1e3 * seconds / (sequences * frames):.2f} ms/frame)")
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+
+    def loss(p, s):
+        return motion_loss(eqx.combine(p, static)(s, warm_start=True), s)
+
+    grad_fn = jax.jit(jax.value_and_grad(loss))
+    memory = grad_fn.lower(params, window).compile().memory_analysis()
+    peak_bytes = None
+    if memory is not None:
+        peak_bytes = memory.argument_size_in_bytes + memory.temp_size_in_bytes + memory.output_size_in_bytes
+    train_fps = window.images.shape[0] / best_seconds(lambda: grad_fn(params, window), repeats)
+    print(f"  training: {train_fps:.1f} frames/s; step memory {peak_bytes / 2**30:.3f} GB (XLA)")
+    return {
+        "inference_frames_per_s": inference_fps,
+        "train_frames_per_s": train_fps,
+        "peak_memory_gb_window64": peak_bytes / 2**30 if peak_bytes is not None else None,
+        "learnable_parameters": model.num_learnable(),
+    }
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sequences", type=int, default=4)
@@ -43,42 +72,24 @@ def main() -> None:
     camera = Camera.kitti()
     seqs = [procedural_sequence(s, args.frames, camera=camera, world=world) for s in range(args.sequences)]
     batch = sq.stack(seqs)
-    model = Bevo.create(BevGrid(0.1, (256, 256), near=4.0))
-    print(f"{model.num_learnable()} learnable parameters; {args.sequences} sequences x {args.frames} frames of {camera.image_shape}")
-
-    infer = eqx.filter_jit(jax.vmap(lambda m, s: m(s), in_axes=(None, 0)))
-    seconds = best_seconds(lambda: infer(model, batch), args.repeats)
-    inference_fps = args.sequences * args.frames / seconds
-    print(f"inference: {inference_fps:.1f} frames/s ({1e3 * seconds / (args.sequences * args.frames):.2f} ms/frame)")
-
-    params, static = eqx.partition(model, eqx.is_inexact_array)
-
-    def loss(p, s):
-        m = eqx.combine(p, static)
-        return motion_loss(m(s, warm_start=True), s)
-
-    window = seqs[0]
-    grad_fn = jax.jit(jax.value_and_grad(loss))
-    compiled = grad_fn.lower(params, window).compile()
-    memory = compiled.memory_analysis()
-    peak_bytes = None
-    if memory is not None:
-        peak_bytes = memory.argument_size_in_bytes + memory.temp_size_in_bytes + memory.output_size_in_bytes
-    seconds_train = best_seconds(lambda: grad_fn(params, window), args.repeats)
-    train_fps = args.frames / seconds_train
+    grid = BevGrid(0.1, (256, 256), near=4.0)
+    results = {}
+    for label, bands in (("with_bands", True), ("without_bands", False)):
+        model = Bevo.create(grid, bands=bands)
+        print(f"{label}: {model.num_learnable()} learnable parameters; {args.sequences} sequences x {args.frames} frames of {camera.image_shape}")
+        results[label] = measure(model, batch, seqs[0], args.repeats)
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
-    print(f"training: {train_fps:.1f} frames/s; step memory {peak_bytes / 2**30:.3f} GB (XLA), process peak RSS {rss_gb:.2f} GB")
+    print(f"process peak RSS {rss_gb:.2f} GB")
+    main_result = results["with_bands"]
 
     write_json_atomic(args.out, {
-        "inference_frames_per_s": inference_fps,
-        "train_frames_per_s": train_fps,
-        "peak_memory_gb_window64": peak_bytes / 2**30 if peak_bytes is not None else None,
+        **main_result,
+        "without_bands": results["without_bands"],
         "process_peak_rss_gb": rss_gb,
         "window_frames": args.frames,
         "sequences": args.sequences,
         "image_shape": list(camera.image_shape),
-        "bev_shape": list(model.grid.shape),
-        "learnable_parameters": model.num_learnable(),
+        "bev_shape": list(grid.shape),
         "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
                     "numpy": np.__version__},
     })
