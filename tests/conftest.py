@@ -1,5 +1,7 @@
-"""Shared test set-up: float64 available everywhere, reference data from $JBEVO_REFERENCE_DATA."""
+"""Shared test set-up: float64 available everywhere, reference data from $JBEVO_REFERENCE_DATA,
+and JAX's compilation caches cleared after each test module."""
 
+import gc
 import os
 from pathlib import Path
 
@@ -20,3 +22,13 @@ def reference_data() -> Path:
     if not path.is_dir():
         pytest.fail(f"JBEVO_REFERENCE_DATA={root} is not a folder")
     return path
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """Every compiled executable keeps its code mapped; one test process compiles hundreds of
+    them and ran past the kernel's limit on memory maps (65,530: XLA then segfaults while
+    compiling). Clearing the caches after each module frees those of finished modules."""
+    yield
+    jax.clear_caches()
+    gc.collect()
