@@ -57,3 +57,17 @@ def test_noise_follows_the_preset_and_the_seed():
     assert np.std(a.accel - [0, 0, imu.GRAVITY]) == pytest.approx(2e-2 * 10.0, rel=0.03)
     with pytest.raises(ValueError, match="body_poses must have shape"):
         imu.simulate_imu(t, poses[:-1])
+
+
+def test_the_biases_are_returned_as_added():
+    """``gyro_bias`` and ``accel_bias`` are exactly what the samples carry besides white noise,
+    and the random walk grows as the preset says (std = random_walk * sqrt(t))."""
+    t, poses = circle_drive(n=301)
+    clean = imu.simulate_imu(t, poses, noise=imu.NOISELESS, smoothing=None)
+    walk = imu.ImuNoise(0.0, 1e-3, 0.0, 3e-3, gyro_turn_on_bias=0.01, accel_turn_on_bias=0.05)
+    d = imu.simulate_imu(t, poses, noise=walk, seed=3, smoothing=None)
+    np.testing.assert_allclose(d.gyro - d.gyro_bias, clean.gyro, atol=1e-12)
+    np.testing.assert_allclose(d.accel - d.accel_bias, clean.accel, atol=1e-12)
+    runs = [imu.simulate_imu(t, poses, noise=imu.ImuNoise(0.0, 0.0, 0.0, 3e-3), seed=s, smoothing=None) for s in range(40)]
+    spread = np.std([r.accel_bias[-1] for r in runs])
+    assert spread == pytest.approx(3e-3 * np.sqrt(t[-1]), rel=0.25)

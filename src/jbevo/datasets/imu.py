@@ -54,6 +54,7 @@ class ImuData(NamedTuple):
     velocity: np.ndarray  # (M, 3) true world velocity
     frame_euler: np.ndarray  # (N, 3) true (yaw, pitch, roll) at the frame times (of the smoothed motion)
     frame_position: np.ndarray  # (N, 3) true position at the frame times (of the smoothed motion)
+    accel_bias: np.ndarray  # (M, 3) the bias the accelerometer carries (turn-on + random walk)
 
 
 def euler_zyx(r: np.ndarray) -> np.ndarray:
@@ -146,7 +147,9 @@ def simulate_imu(
     )
     gyro = gyro + gyro_bias + rng.normal(0, noise.gyro_noise_density * np.sqrt(rate_hz), (n, 3))
     accel = accel + accel_bias + rng.normal(0, noise.accel_noise_density * np.sqrt(rate_hz), (n, 3))
-    return ImuData(t, gyro, accel, gyro_bias, _wrap_yaw(e), pos(t), pos(t, 1), _wrap_yaw(ang(frame_times)), pos(frame_times))
+    return ImuData(
+        t, gyro, accel, gyro_bias, _wrap_yaw(e), pos(t), pos(t, 1), _wrap_yaw(ang(frame_times)), pos(frame_times), accel_bias
+    )
 
 
 def _wrap_yaw(euler: np.ndarray) -> np.ndarray:
