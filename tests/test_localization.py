@@ -1,3 +1,5 @@
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -15,7 +17,6 @@ from jbevo.datasets.world import World
 from jbevo.geometry import se2_between, se2_compose, wrap_angle
 from jbevo.localization import BevoPlus, localization_loss, map_crop, match_to_map, planar_pose_model
 from jbevo.localize import create_model, pose_errors
-from jbevo.odometry import Bevo
 
 
 def kitti_planar(path):
@@ -203,8 +204,7 @@ def test_bevo_plus_composes_an_odometry_with_bands(carla):
     seq, m = carla.sequence, carla.map
     model = create_model("carla")
     odo = model.odometry
-    with_bands = eqx.tree_at(lambda mod: mod.odometry, model, Bevo(
-        odo.attitude, odo.dpc, odo.grid, odo.feather, odo.attitude_source, odo.gyro_window, BandGeometry.create()))
+    with_bands = eqx.tree_at(lambda mod: mod.odometry, model, dataclasses.replace(odo, bands=BandGeometry.create()))
     assert with_bands.num_learnable() == 31
     out = eqx.filter_jit(lambda mod, s, mp: mod(s, mp, warm_start=True))(with_bands, seq, m)
     assert np.all(np.isfinite(np.asarray(out.poses))) and np.all(np.isfinite(np.asarray(out.position_std)))

@@ -116,6 +116,24 @@ def test_equals_linear_kalman_filter_on_linear_model(scheme):
     np.testing.assert_allclose(res.log_likelihood, ref_ll, rtol=1e-9)
 
 
+def test_scalar_linear_update_equals_the_unscented_update():
+    """``linear_update`` with ``z = h x`` is the UKF's update on that (linear) measurement, which
+    the unscented transform gets exactly; ``use=False`` leaves the belief as it was."""
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(4, 4))
+    prior = ukf.GaussianState(jnp.asarray(rng.normal(size=4)), jnp.asarray(a @ a.T + np.eye(4)))
+    h, z, variance = jnp.asarray(rng.normal(size=4)), 0.7, 0.3
+    model = ukf.StateSpaceModel(motion=lambda x, u: x, measurement=lambda x: (h @ x)[None])
+    expected, _ = ukf.update(model, prior, jnp.array([z]), jnp.array([[variance]]))
+    post = ukf.linear_update(prior, h, z - h @ prior.mean, variance)
+    np.testing.assert_allclose(post.mean, expected.mean, atol=1e-12)
+    np.testing.assert_allclose(post.cov, expected.cov, atol=1e-12)
+    np.testing.assert_array_equal(post.cov, post.cov.T)
+    kept = ukf.linear_update(prior, h, z - h @ prior.mean, variance, use=jnp.asarray(False))
+    np.testing.assert_array_equal(kept.mean, prior.mean)
+    np.testing.assert_array_equal(kept.cov, prior.cov)
+
+
 def test_all_missing_measurement_is_a_predict_only_step():
     model = planar_pose_model()
     prior = ukf.GaussianState(jnp.array([1.0, 2.0, 3.1]), jnp.asarray(P0))

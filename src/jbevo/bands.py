@@ -127,18 +127,14 @@ class BandGeometry(eqx.Module):
     ) -> ukf.GaussianState:
         """Condition the speed-aided attitude belief (whose mean projected the current BEV) on the
         forward-shift slope (module docstring); unchanged where ``use`` is False."""
-        mean, cov = predicted
+        mean = predicted.mean
         (x_far, x_near), (m2_far, m2_near) = band_moments(grid, params.window_taper, 1), band_moments(grid, params.window_taper, 2)
         travel = self._extrapolate(shifts.forward, grid, params)
         c = (m2_far - m2_near) / (x_far - x_near) + 2.0 * travel
         h_row = jnp.zeros_like(mean).at[PITCH].set(2.0 * travel / height).at[BIAS_Y].set(c * frame_dt / height)
         innovation = self._slope(shifts.forward, grid, params)
-        ph = cov @ h_row
-        gain = ph / (h_row @ ph + jnp.exp(2.0 * self.log_slope_std))
-        new_cov = cov - jnp.outer(gain, ph)
-        new = ukf.GaussianState(mean + gain * innovation, 0.5 * (new_cov + new_cov.T))
         ok = use & jnp.isfinite(innovation)
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, predicted)
+        return ukf.linear_update(predicted, h_row, innovation, jnp.exp(2.0 * self.log_slope_std), ok)
 
     def motion(
         self, shifts: BandShifts, reg: Registration, grid: BevGrid, params: DPCParams, height: Array, drift: Array

@@ -19,6 +19,7 @@ with per-sequence and overall ``t_err_pct``, ``r_err_deg_per_100m``, ``ate_m`` a
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -78,7 +79,7 @@ def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str, b
     model, _, _ = checkpoint.load(path)
     if not isinstance(model, Bevo):
         raise SystemExit(f"{path} holds a BEVO+ localizer; evaluate it with python -m jbevo.localize evaluate")
-    return Bevo(model.attitude, model.dpc, model.grid, model.feather, attitude, model.gyro_window, model.bands)
+    return dataclasses.replace(model, attitude_source=attitude)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -53,12 +53,12 @@ from jaxtyping import Array, Bool, Float
 
 from jbevo import ukf
 from jbevo.attitude import gyro_yaw_increment
+from jbevo.bands import band_moments, register_bands
 from jbevo.camera import BevGrid, Camera, bev_increment, bev_project
 from jbevo.datasets.maps import Map
 from jbevo.datasets.sequence import Sequence
 from jbevo.geometry import se2_compose, wrap_angle
 from jbevo.odometry import Bevo, feather_to_mean, feathered_bev, num_learnable, planar_huber
-from jbevo.bands import band_moments, register_bands
 from jbevo.registration import DPCParams, register
 from jbevo.ukf import StateSpaceModel
 from jbevo.unscented import circular_mean_fn, wrapped_add_fn, wrapped_residual_fn
@@ -344,10 +344,8 @@ class BevoPlus(eqx.Module):
 def _measure_pitch(state: ukf.GaussianState, pitch: Array, std: Array, accept: Array) -> ukf.GaussianState:
     """Kalman update of the attitude belief (pitch first) with a direct pitch measurement; the
     belief unchanged where ``accept`` is False."""
-    mean, cov = state
-    gain = cov[:, 0] / (cov[0, 0] + std**2)
-    new = ukf.GaussianState(mean + gain * (pitch - mean[0]), cov - gain[:, None] * cov[0][None, :])
-    return jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new, state)
+    h = jnp.zeros_like(state.mean).at[0].set(1.0)
+    return ukf.linear_update(state, h, pitch - state.mean[0], std**2, accept)
 
 
 def localization_loss(

@@ -163,6 +163,21 @@ def update(
     return GaussianState(new_mean, new_cov), log_lik
 
 
+def linear_update(
+    state: GaussianState, h: Float[Array, " n"], innovation: Float[Array, ""], variance: Float[Array, ""],
+    use: Bool[Array, ""] | bool = True,
+) -> GaussianState:
+    """Kalman update with one scalar linear measurement ``z = h x + v``, ``v ~ N(0, variance)``,
+    given its ``innovation`` ``z - h mean``; the covariance is symmetrised, and the belief is left
+    unchanged where ``use`` is False. For measurements that are linear in the state (no sigma
+    points needed), as the attitude filters' pitch measurements from the BEV are."""
+    mean, cov = state
+    ph = cov @ h
+    gain = ph / (h @ ph + variance)
+    new = GaussianState(mean + gain * innovation, linalg.symmetrize(cov - jnp.outer(gain, ph)))
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(use, a, b), new, state)
+
+
 def _noise_at(noise: Array, t_noise):
     """Per-step noise: the scanned slice if the noise has a time axis, else the constant."""
     return noise if t_noise is None else t_noise
