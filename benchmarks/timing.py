@@ -18,3 +18,18 @@ def best_seconds(fn, repeats: int) -> float:
         jax.block_until_ready(fn())
         best = min(best, time.perf_counter() - t0)
     return best
+
+
+def best_seconds_interleaved(fns: dict, repeats: int) -> dict:
+    """Best wall time of each ``fns[name]()`` over ``repeats`` rounds that run every function once
+    in turn (after one warm-up call each), so that a slow spell of a shared machine falls on all
+    of them rather than on whichever was being timed; waits for JAX results."""
+    for fn in fns.values():
+        jax.block_until_ready(fn())
+    best = dict.fromkeys(fns, float("inf"))
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            jax.block_until_ready(fn())
+            best[name] = min(best[name], time.perf_counter() - t0)
+    return best
