@@ -11,13 +11,7 @@ import jax
 def best_seconds(fn, repeats: int) -> float:
     """Best wall time of ``fn()`` over ``repeats`` runs, after one warm-up call (compilation);
     waits for JAX results."""
-    jax.block_until_ready(fn())
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        best = min(best, time.perf_counter() - t0)
-    return best
+    return best_seconds_interleaved({"fn": fn}, repeats)["fn"]
 
 
 def best_seconds_interleaved(fns: dict, repeats: int) -> dict:
