@@ -71,3 +71,39 @@ def test_bevo_plus_round_trip(tmp_path):
     assert isinstance(back, BevoPlus) and back.map_grid == model.map_grid and back.odometry.grid == odometry.grid
     assert back.odometry.gyro_window == pytest.approx(0.03) and back.min_confidence == 0.1 and not back.gyro_yaw
     np.testing.assert_allclose(back.fix_log_std, [-1.0, -2.0, -3.0])
+
+
+def test_every_static_setting_of_a_non_default_model_round_trips(tmp_path):
+    """Every field comes back, the static ones included (DPC's radii, taper, peak window and
+    padding, the feathering widths, the grids): the reloaded model equals the saved one."""
+    import dataclasses
+
+    from jbevo.localization import BevoPlus
+
+    odometry = Bevo.create(
+        cam.BevGrid(0.05, (32, 48), near=3.0), gyro_window=0.03, bands=True,
+        n_radii=32, min_radius=0.03, max_radius=0.3, window_taper=0.4, peak_half_width=3, pad=1,
+    )
+    odometry = dataclasses.replace(odometry, feather=2)
+    model = BevoPlus.create(odometry, cam.BevGrid(0.1, (32, 32), near=3.0), n_angles=64, n_radii=16, reacquire_after=7)
+    model = dataclasses.replace(model, map_feather=3)
+    model = eqx.tree_at(lambda m: m.fix_log_std, model, jnp.array([-1.0, -2.0, -3.0], jnp.float32))
+    checkpoint.save(tmp_path / "custom.ckpt", model)
+    back, _, _ = checkpoint.load(tmp_path / "custom.ckpt")
+    assert eqx.tree_equal(back, model)
+    assert back.odometry.dpc.n_radii == 32 and back.odometry.dpc.pad == 1 and back.odometry.feather == 2
+    assert back.map_feather == 3 and back.map_dpc.n_radii == 16 and back.reacquire_after == 7
+
+
+def test_only_jbevo_classes_are_rebuilt(tmp_path):
+    good = tmp_path / "good.ckpt"
+    checkpoint.save(good, Bevo.create())
+    with np.load(good) as data:
+        arrays = dict(data)
+    config = checkpoint.model_config(Bevo.create())
+    config["model"]["module"] = "os:system"
+    arrays["config"] = np.array(__import__("json").dumps(config))
+    with open(tmp_path / "foreign.ckpt", "wb") as f:
+        np.savez(f, **arrays)
+    with pytest.raises(ValueError, match="only hold jbevo's classes"):
+        checkpoint.load(tmp_path / "foreign.ckpt")

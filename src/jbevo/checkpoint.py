@@ -1,15 +1,19 @@
-"""BEVO and BEVO+ checkpoints: the model's configuration, its learnable leaves, the optimizer state and the
-training progress in one file, written atomically.
+"""Model checkpoints: the model's whole structure, its learnable leaves, the optimizer state and
+the training progress in one file, written atomically.
 
-A checkpoint is a ``.npz`` archive with ``config`` (JSON: what is needed to rebuild the model's
-structure), ``leaves`` (``equinox.tree_serialise_leaves`` of ``(model, opt_state)``) and
-``progress`` (JSON). Loading rebuilds the model from the config and reads the leaves into it; a
-missing file, a file that is not a checkpoint, or one whose structure does not match raises a
-``ValueError`` (``FileNotFoundError``) naming the file and what is wrong.
+A checkpoint is a ``.npz`` archive with ``config`` (JSON: the model's tree, every
+``equinox.Module`` by its class and every field by its value, so static settings such as DPC's
+radii or a BEV grid come back exactly), ``leaves`` (``equinox.tree_serialise_leaves`` of
+``(model, opt_state)``) and ``progress`` (JSON). Only jbevo's own classes are rebuilt from a
+file. A missing file raises ``FileNotFoundError``; a file that is not a checkpoint, or one whose
+structure does not match the classes of this jbevo, raises ``ValueError`` naming the file and
+what is wrong.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import importlib
 import io
 import json
 import zipfile
@@ -17,63 +21,86 @@ from pathlib import Path
 from typing import Any
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from jbevo.camera import BevGrid
 from jbevo.files import write_atomic
-from jbevo.localization import BevoPlus
-from jbevo.odometry import Bevo
 
-FORMAT = 1
+FORMAT = 2
 
 
-def _grid_config(g: BevGrid) -> dict:
-    return {"resolution": g.resolution, "shape": list(g.shape), "origin": list(g.origin)}
+def describe(tree: Any) -> Any:
+    """A JSON-able description of a model: modules by class and fields, arrays by shape and
+    dtype (their values are saved apart), Python scalars, strings, None and tuples as they are."""
+    if isinstance(tree, eqx.Module):
+        cls = type(tree)
+        fields = {f.name: describe(getattr(tree, f.name)) for f in dataclasses.fields(tree)}
+        return {"module": f"{cls.__module__}:{cls.__qualname__}", "fields": fields}
+    if isinstance(tree, (jax.Array, np.ndarray)):
+        return {"array": list(tree.shape), "dtype": str(tree.dtype)}
+    if tree is None or isinstance(tree, (bool, int, float, str)):
+        return tree
+    if isinstance(tree, tuple):
+        return {"tuple": [describe(v) for v in tree]}
+    raise ValueError(f"a checkpoint cannot record a {type(tree).__name__} ({tree!r})")
 
 
-def _grid(g: dict) -> BevGrid:
-    return BevGrid(g["resolution"], tuple(g["shape"]), tuple(g["origin"]))
+def rebuild(description: Any) -> Any:
+    """The model :func:`describe` described, with zero arrays in place of the learned leaves."""
+    if isinstance(description, dict):
+        if "module" in description:
+            cls = _module_class(description["module"])
+            expected = {f.name for f in dataclasses.fields(cls)}
+            got = set(description["fields"])
+            if got != expected:
+                raise ValueError(
+                    f"{cls.__qualname__} has the fields {sorted(expected)}, the checkpoint {sorted(got)}"
+                )
+            obj = object.__new__(cls)
+            for name, value in description["fields"].items():
+                object.__setattr__(obj, name, rebuild(value))
+            return obj
+        if "array" in description:
+            return jnp.zeros(tuple(description["array"]), np.dtype(description["dtype"]))
+        if "tuple" in description:
+            return tuple(rebuild(v) for v in description["tuple"])
+        raise ValueError(f"unknown entry {sorted(description)} in a checkpoint's model description")
+    if isinstance(description, list):
+        raise ValueError("unknown list in a checkpoint's model description")
+    return description
 
 
-def model_config(model: Bevo | BevoPlus) -> dict:
-    """What rebuilds ``model``'s structure (not its learned values): a BEVO odometry model or a
-    BEVO+ localizer (``"kind"``)."""
-    if isinstance(model, BevoPlus):
-        return {
-            "format": FORMAT, "kind": "bevo+", "odometry": model_config(model.odometry),
-            "map_grid": _grid_config(model.map_grid), "map_n_angles": model.map_dpc.n_angles,
-            "min_confidence": model.min_confidence, "gate": model.gate, "gyro_yaw": model.gyro_yaw,
-            "reacquire_after": model.reacquire_after,
-        }
-    return {
-        "format": FORMAT,
-        "kind": "bevo",
-        "grid": _grid_config(model.grid),
-        "imu_dt": model.attitude.dt,
-        "n_angles": model.dpc.n_angles,
-        "attitude_source": model.attitude_source,
-        "gyro_window": model.gyro_window,
-        "bands": model.bands is not None,
-    }
+def _module_class(name: str) -> type:
+    module, _, qualname = name.partition(":")
+    if module != "jbevo" and not module.startswith("jbevo."):
+        raise ValueError(f"a checkpoint may only hold jbevo's classes, not {name}")
+    try:
+        obj: Any = importlib.import_module(module)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as error:
+        raise ValueError(f"this jbevo has no class {name}") from error
+    if not (isinstance(obj, type) and issubclass(obj, eqx.Module)):
+        raise ValueError(f"{name} is not a model class")
+    return obj
 
 
-def model_from_config(config: dict) -> Bevo | BevoPlus:
-    """A hand-set model with the structure ``config`` describes."""
+def model_config(model: eqx.Module) -> dict:
+    """What rebuilds ``model``'s structure (not its learned values)."""
+    return {"format": FORMAT, "model": describe(model)}
+
+
+def model_from_config(config: dict) -> Any:
+    """A model with the structure ``config`` describes and zero learnable leaves."""
     if config.get("format") != FORMAT:
         raise ValueError(f"checkpoint format {config.get('format')} is not {FORMAT}")
-    if config.get("kind", "bevo") == "bevo+":
-        return BevoPlus.create(
-            model_from_config(config["odometry"]), _grid(config["map_grid"]), min_confidence=config["min_confidence"],
-            gate=config["gate"], gyro_yaw=config["gyro_yaw"], reacquire_after=config.get("reacquire_after", 5),
-            n_angles=config["map_n_angles"],
-        )
-    return Bevo.create(
-        _grid(config["grid"]), config["imu_dt"], config["attitude_source"], config.get("gyro_window", 0.0),
-        bands=config.get("bands", False), n_angles=config["n_angles"],
-    )
+    return rebuild(config["model"])
 
 
-def save(path: str | Path, model: Bevo | BevoPlus, opt_state: Any = None, progress: dict | None = None) -> None:
+def save(path: str | Path, model: eqx.Module, opt_state: Any = None, progress: dict | None = None) -> None:
+    """Write ``model`` (its structure and leaves), ``opt_state`` and ``progress`` to ``path``
+    atomically."""
     leaves = io.BytesIO()
     eqx.tree_serialise_leaves(leaves, (model, opt_state))
     buffer = io.BytesIO()
@@ -86,7 +113,7 @@ def save(path: str | Path, model: Bevo | BevoPlus, opt_state: Any = None, progre
     write_atomic(Path(path), lambda f: f.write(buffer.getvalue()), mode="wb")
 
 
-def load(path: str | Path, opt_state_like: Any = None) -> tuple[Bevo | BevoPlus, Any, dict]:
+def load(path: str | Path, opt_state_like: Any = None) -> tuple[Any, Any, dict]:
     """``(model, opt_state, progress)`` from ``path``; ``opt_state_like`` is an optimizer state of
     the right structure (``optimizer.init(model params)``), or None to skip it."""
     path = Path(path)

@@ -7,7 +7,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from jbevo.datasets.imu import GRAVITY, NOISELESS, euler_zyx, simulate_imu
-from jbevo.datasets.trajectories import CAMERA_HEIGHT, kitti_drive, procedural_drive
+from jbevo.datasets.trajectories import CAMERA_HEIGHT, kitti_drive, procedural_drive, speed_targets
 from jbevo.trajectory_io import read_kitti
 
 
@@ -27,6 +27,29 @@ def test_procedural_drive_is_deterministic_and_car_like():
     moving = step > 0.2
     slip = np.angle(np.exp(1j * (heading - euler[:-1, 0] - 0.5 * np.diff(np.unwrap(euler[:, 0])))))
     assert np.abs(slip[moving]).max() < np.radians(3)
+
+
+def test_every_speed_target_is_written_and_a_long_stop_lasts_its_length():
+    """A stop (2-5 s) drawn after a shorter hold (4-12 s) used to leave samples unwritten (memory
+    garbage: drives that differed between two identical calls). Replaying the draws shows each
+    stop whole at zero and every sample finite, on the seeds whose stops outlast their holds."""
+    dt, n = 0.01, 60_000
+    seen_long_stop = 0
+    for seed in range(40):
+        target = speed_targets(np.random.default_rng(seed), n, dt, (4.0, 14.0), 0.5)
+        assert np.all(np.isfinite(target)) and np.all((target == 0) | ((target >= 4) & (target <= 14)))
+        rng, i = np.random.default_rng(seed), 0
+        while i < n:
+            hold = int(rng.uniform(4.0, 12.0) / dt)
+            stop = rng.random() < 0.5 and i > 0
+            length = int(rng.uniform(2.0, 5.0) / dt) if stop else hold
+            if not stop:
+                rng.uniform(4.0, 14.0)
+            elif length > hold:
+                seen_long_stop += 1
+                assert np.all(target[i : i + length] == 0.0)
+            i += length
+    assert seen_long_stop > 0
 
 
 def _quat_rate(q, w):

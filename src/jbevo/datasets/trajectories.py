@@ -35,6 +35,25 @@ def _oscillation(rng, n, dt, frequency, damping, std):
     return out * (std / (out.std() + 1e-12))
 
 
+def speed_targets(
+    rng: np.random.Generator, n: int, dt: float, speed_range: tuple[float, float], stop_probability: float
+) -> np.ndarray:
+    """Piecewise-constant speed targets for ``n`` samples ``dt`` apart: holds of 4-12 s at a
+    speed drawn from ``speed_range``, or (with ``stop_probability``, never first) stops of
+    2-5 s at zero; the first second is at rest. Every sample is written: a stop longer than the
+    hold drawn before it lasts its own length."""
+    target = np.full(n, np.nan)
+    i = 0
+    while i < n:
+        hold = int(rng.uniform(4.0, 12.0) / dt)
+        stop = rng.random() < stop_probability and i > 0
+        length = int(rng.uniform(2.0, 5.0) / dt) if stop else hold
+        target[i : i + length] = 0.0 if stop else rng.uniform(*speed_range)
+        i += length
+    target[: int(1.0 / dt)] = 0.0  # start at rest, as a filter is initialised
+    return target
+
+
 def procedural_drive(
     seed: int,
     n_frames: int,
@@ -61,14 +80,7 @@ def procedural_drive(
     dt = 0.01
     duration = (n_frames - 1) / frame_rate
     n = int(round(duration / dt)) + 1
-    target = np.empty(n)
-    i = 0
-    while i < n:
-        hold = int(rng.uniform(4.0, 12.0) / dt)
-        stop = rng.random() < stop_probability and i > 0
-        target[i : i + hold] = 0.0 if stop else rng.uniform(*speed_range)
-        i += int(rng.uniform(2.0, 5.0) / dt) if stop else hold
-    target[: int(1.0 / dt)] = 0.0  # start at rest, as a filter is initialised
+    target = speed_targets(rng, n, dt, speed_range, stop_probability)
     speed = np.empty(n)
     speed[0] = 0.0
     for k in range(1, n):
