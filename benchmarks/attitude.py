@@ -48,16 +48,20 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import equinox as eqx  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import optax  # noqa: E402
+import equinox as eqx   # noqa: E402
+import jax.numpy as jnp   # noqa: E402
+import numpy as np   # noqa: E402
+import optax   # noqa: E402
 
-from jbevo import trajectory_io  # noqa: E402
-from jbevo import ukf  # noqa: E402
-from jbevo.attitude import AttitudeFilter, SpeedAidedAttitude, integrate_gyro, tilt_measurements  # noqa: E402
-from jbevo.datasets import imu  # noqa: E402
+from jbevo.inertial.attitude_filter import AttitudeFilter, integrate_gyro  # noqa: E402
+from jbevo.inertial.speed_aided import SpeedAidedAttitude  # noqa: E402
+from jbevo.inertial.kinematics import tilt_measurements  # noqa: E402
+from jbevo.data.kitti_frames import body_poses_from_kitti   # noqa: E402
+from jbevo.data.synthetic.imu import ADIS16448, planar_body_velocity, simulate_imu   # noqa: E402
+from jbevo.inertial.kinematics import GRAVITY   # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
+from jbevo.eval import pose_files as trajectory_io
+from jbevo.filtering import ukf
 
 TRAIN = [f"{i:02d}" for i in range(9)]
 TEST = ["09", "10"]
@@ -67,22 +71,22 @@ DT = 0.01
 
 def load_sequence(root: Path, name: str, speed_noise: float) -> dict:
     gt = trajectory_io.read_kitti(root / "kitti_odom" / "gt_poses" / f"{name}.txt").poses
-    body = imu.body_poses_from_kitti(gt)
+    body = body_poses_from_kitti(gt)
     t = 0.1 * np.arange(len(gt))
-    d = imu.simulate_imu(t, body, rate_hz=1 / DT, noise=imu.ADIS16448, seed=int(name))
+    d = simulate_imu(t, body, rate_hz=1 / DT, noise=ADIS16448, seed=int(name))
     n = len(gt) - 1
     gyro = d.gyro[: n * SAMPLES].reshape(n, SAMPLES, 3)
     accel = d.accel[: n * SAMPLES].reshape(n, SAMPLES, 3)
     rng = np.random.default_rng(100 + int(name))
     # The odometry's planar body-frame velocity (a stand-in until BEVO's own is available): the
     # true world velocity turned into the body's heading, plus noise.
-    vb = imu.planar_body_velocity(d)[: n * SAMPLES].reshape(n, SAMPLES, 2).mean(1)
+    vb = planar_body_velocity(d)[: n * SAMPLES].reshape(n, SAMPLES, 2).mean(1)
     vb = vb + rng.normal(0, speed_noise, (n, 2))
     # The tilt the accelerometer's own bias fakes (small angles: pitch -b_x / g, roll b_y / g) at
     # the end of each frame: body-fixed like gravity's tilt, so no filter here can tell them apart.
     ab = d.accel_bias[SAMPLES - 1 : n * SAMPLES : SAMPLES]
     return {
-        "accel_bias_tilt": np.stack([-ab[:, 0], ab[:, 1]], -1) / imu.GRAVITY,
+        "accel_bias_tilt": np.stack([-ab[:, 0], ab[:, 1]], -1) / GRAVITY,
         "gyro": gyro,
         "accel": accel,
         "velocity": vb,

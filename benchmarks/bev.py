@@ -21,9 +21,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jbevo import camera as cam
 from jbevo.files import write_json_atomic
 from timing import best_seconds
+from jbevo.geometry.bev_grid import BevGrid
+from jbevo.geometry.camera import Camera
+from jbevo.vision.bev import bev_project, bev_to_image_homography
 
 
 def main() -> None:
@@ -33,17 +35,17 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "bev.json")
     args = parser.parse_args()
 
-    camera = cam.Camera.kitti()
-    grid = cam.BevGrid(0.1, (256, 256), near=4.0)
+    camera = Camera.kitti()
+    grid = BevGrid(0.1, (256, 256), near=4.0)
     rng = np.random.default_rng(0)
     images = jnp.asarray(rng.random((args.batch, *camera.image_shape)), jnp.float32)
     pitch = jnp.asarray(np.radians(rng.uniform(-3, 3, args.batch)), jnp.float32)
     roll = jnp.asarray(np.radians(rng.uniform(-3, 3, args.batch)), jnp.float32)
 
-    ours = jax.jit(jax.vmap(lambda im, p, r: cam.bev_project(im, p, r, camera, grid)))
+    ours = jax.jit(jax.vmap(lambda im, p, r: bev_project(im, p, r, camera, grid)))
 
     def dmpix_one(image, p, r):
-        h = cam.bev_to_image_homography(camera, grid, p, r)
+        h = bev_to_image_homography(camera, grid, p, r)
         rows, cols = jnp.meshgrid(jnp.arange(256.0), jnp.arange(256.0), indexing="ij")
         q = jnp.einsum("ij,jhw->ihw", h, jnp.stack([cols, rows, jnp.ones_like(rows)]))
         coords = jnp.stack([q[1] / q[2], q[0] / q[2]], -1)  # (row, col)
@@ -51,7 +53,7 @@ def main() -> None:
 
     dmpix = jax.jit(jax.vmap(dmpix_one))
 
-    homographies = [np.asarray(cam.bev_to_image_homography(camera, grid, p, r)) for p, r in zip(pitch, roll)]
+    homographies = [np.asarray(bev_to_image_homography(camera, grid, p, r)) for p, r in zip(pitch, roll)]
     images_np = np.asarray(images)
 
     def opencv():
@@ -62,7 +64,7 @@ def main() -> None:
     for name, fn in (("jbevo", lambda: ours(images, pitch, roll)), ("dm_pix", lambda: dmpix(images, pitch, roll))):
         results[f"{name}_bev_per_s"] = args.batch / best_seconds(fn, args.repeats)
     results["opencv_bev_per_s"] = args.batch / best_seconds(opencv, args.repeats)
-    single = jax.jit(lambda im, p, r: cam.bev_project(im, p, r, camera, grid))
+    single = jax.jit(lambda im, p, r: bev_project(im, p, r, camera, grid))
     results["jbevo_single_ms"] = 1e3 * best_seconds(lambda: single(images[0], pitch[0], roll[0]), args.repeats)
     results["bev_per_s"] = results["jbevo_bev_per_s"]
     results["speedup_vs_dm_pix"] = results["jbevo_bev_per_s"] / results["dm_pix_bev_per_s"]

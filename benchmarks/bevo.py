@@ -23,12 +23,11 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from jbevo.camera import BevGrid, Camera
-from jbevo.datasets import sequence as sq
-from jbevo.datasets.synthetic import procedural_sequence
-from jbevo.datasets.world import World
+from jbevo import data
+from jbevo.data.synthetic import World, procedural_sequence
 from jbevo.files import write_json_atomic
-from jbevo.odometry import Bevo, motion_loss
+from jbevo.geometry import BevGrid, Camera
+from jbevo.models import Bevo, motion_loss
 from timing import best_seconds
 
 
@@ -71,7 +70,7 @@ def main() -> None:
     world = World.create("town01")
     camera = Camera.kitti()
     seqs = [procedural_sequence(s, args.frames, camera=camera, world=world) for s in range(args.sequences)]
-    batch = sq.stack(seqs)
+    batch = data.stack(seqs)
     grid = BevGrid(0.1, (256, 256), near=4.0)
     results = {}
     for label, bands in (("with_bands", True), ("without_bands", False)):

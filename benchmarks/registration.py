@@ -35,7 +35,8 @@ import skimage.data
 from skimage.registration import phase_cross_correlation
 
 from jbevo.files import write_json_atomic
-from jbevo.registration import DPCParams, register, register_translation
+from jbevo.vision.dpc_params import DPCParams
+from jbevo.vision.registration import register, register_translation
 from timing import best_seconds
 
 PHOTOS = ("grass", "gravel", "brick", "camera")

@@ -20,12 +20,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jbevo.camera import Camera
-from jbevo.datasets.conditions import CONDITIONS
-from jbevo.datasets.render import render_batch
-from jbevo.datasets.synthetic import _frames, procedural_sequence
-from jbevo.datasets.trajectories import procedural_drive
-from jbevo.datasets.world import World
+from jbevo.geometry.camera import Camera
+from jbevo.data.synthetic.conditions import CONDITIONS
+from jbevo.data.synthetic.render import render_batch
+from jbevo.data.synthetic.sequences import _frames, procedural_sequence
+from jbevo.data.synthetic.trajectories import procedural_drive
+from jbevo.data.synthetic.world import World
 from jbevo.files import write_json_atomic
 from timing import best_seconds
 

@@ -24,12 +24,12 @@ jax.config.update("jax_enable_x64", True)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from jbevo import ukf  # noqa: E402
-from jbevo.datasets.planar import simulate_planar_sequence  # noqa: E402
+from jbevo.data.synthetic.planar import simulate_planar_sequence  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
+from jbevo.filtering import ukf  # noqa: E402
+from jbevo.filtering.planar import planar_pose_model  # noqa: E402
+from jbevo.filtering.unscented import MerweScaled  # noqa: E402
 from jbevo.geometry import sincos, wrap_angle  # noqa: E402
-from jbevo.localization import planar_pose_model  # noqa: E402
-from jbevo.unscented import MerweScaled  # noqa: E402
 from timing import best_seconds_interleaved  # noqa: E402
 
 ALPHA, BETA, KAPPA = 1.0, 2.0, 0.0

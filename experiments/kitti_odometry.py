@@ -26,14 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
-from jbevo import evaluate, metrics, train
-from jbevo.camera import BevGrid
-from jbevo.datasets.catalog import load_sequences
+from jbevo.cli import evaluate, train
+from jbevo.data.catalog import load_sequences
+from jbevo.eval.batch import run_many
+from jbevo.eval.devkit import SEGMENT_LENGTHS
+from jbevo.eval.plots import trajectory_top_view
+from jbevo.eval.scores import score
 from jbevo.files import write_json_atomic, write_text_atomic
-from jbevo.metrics import SEGMENT_LENGTHS
-from jbevo.odometry import BevoOutput
-from jbevo.odometry_metrics import score, segment_errors
-from jbevo.plots import trajectory_top_view
+from jbevo.geometry import BevGrid
 
 # label: (parameters, attitude source, band geometry)
 VARIANTS = {
@@ -82,15 +82,15 @@ def main() -> int:
     for label, (params, attitude, with_bands) in VARIANTS.items():
         ckpt = run_dir / "best.ckpt" if params == "learned" else None
         model = evaluate.load_model(ckpt, grid, seqs[0].imu_dt, attitude, with_bands and not args.no_bands)
-        outs, fps = evaluate.run_many(model, seqs, warm_start=True)
+        outs, fps = run_many(model, seqs, warm_start=True)
         outputs[label] = outs
         rows[label] = {}
         for name, out, seq in zip(test_names, outs, seqs):
-            s = score(BevoOutput(*map(np.asarray, out)), seq, SEGMENT_LENGTHS)
+            s = score(out, seq, SEGMENT_LENGTHS)
             rows[label][name] = {k: s[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m")}
         # Both test sequences together: the devkit pools their segments.
-        pooled = metrics.kitti_errors([segment_errors(o.poses, q.planar, SEGMENT_LENGTHS) for o, q in zip(outs, seqs)])
-        rows[label]["pooled"] = {"t_err_pct": float(pooled.t_err_pct), "r_err_deg_per_100m": float(pooled.r_err_deg_per_100m)}
+        pooled = score(outs, seqs, SEGMENT_LENGTHS)
+        rows[label]["pooled"] = {k: pooled[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
         rows[label]["frames_per_s"] = fps
         print(label, rows[label])
     for i, name in enumerate(test_names):

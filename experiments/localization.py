@@ -21,7 +21,7 @@ import shutil
 import time
 from pathlib import Path
 
-from jbevo import localize
+from jbevo.cli import localize
 from jbevo.files import write_json_atomic, write_text_atomic
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -31,8 +31,8 @@ METHODS = ("BEVO+", "BEVO odometry", "map matching alone")
 def run_kind(kind: str, epochs: int, out: Path) -> dict:
     run = out / f"localization_{kind}_run"
     localize.main(["train", "--kind", kind, "--epochs", str(epochs), "--out", str(run)])
-    learned = localize.evaluate(localize.parse_args(["evaluate", "--kind", kind, "--checkpoint", str(run), "--out", str(run / "eval")]))
-    hand = localize.evaluate(localize.parse_args(["evaluate", "--kind", kind, "--out", str(run / "eval_hand_set")]))
+    learned = localize.evaluate(localize.build_parser().parse_args(["evaluate", "--kind", kind, "--checkpoint", str(run), "--out", str(run / "eval")]))
+    hand = localize.evaluate(localize.build_parser().parse_args(["evaluate", "--kind", kind, "--out", str(run / "eval_hand_set")]))
     rows = {}
     for name, entry in learned["scenes"].items():
         condition = name.split("_")[2]

@@ -1,0 +1,2 @@
+"""The command lines (``python -m jbevo.train``, ``.evaluate``, ``.localize``, ``.metrics``,
+``.demo``, ``.render``); they share :mod:`jbevo.cli.common`. No library module imports them."""

@@ -1,0 +1,157 @@
+"""What every command line shares: the parent parsers of the options they have in common, and
+one exit-code convention.
+
+* ``0``: done.
+* ``2``: a usage error (an unknown option, a value of the wrong type or range): argparse's
+  message and the usage line.
+* ``1``: bad input data (a missing file or folder, a malformed or incompatible file): one line
+  ``prog: error: ...`` naming what is wrong, no traceback. Only the code that reads inputs is
+  wrapped (:func:`reading`), so an error anywhere else is a bug and shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from pathlib import Path
+
+from jbevo.data.catalog import DATASETS
+from jbevo.data.synthetic.world import TOWNS
+from jbevo.geometry.bev_grid import BevGrid
+
+
+class CommandError(Exception):
+    """Bad input that a command reports in one line and exit code 1."""
+
+
+@contextlib.contextmanager
+def reading(what: str) -> Iterator[None]:
+    """Turn the errors of reading ``what`` (``ValueError``, ``OSError``, ``FileNotFoundError``)
+    into a :class:`CommandError`."""
+    try:
+        yield
+    except (ValueError, OSError) as error:
+        raise CommandError(f"{what}: {error}") from None
+
+
+def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace], int | None], argv: Sequence[str] | None) -> int:
+    """Parse ``argv`` (exit 2 on a usage error) and run ``command``; a :class:`CommandError`
+    prints ``prog: error: message`` and gives 1."""
+    args = parser.parse_args(argv)
+    try:
+        result = command(args)
+    except CommandError as error:
+        print(f"{parser.prog}: error: {error}", file=sys.stderr)
+        return 1
+    return result if isinstance(result, int) else 0
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """An argparse type: a number > 0."""
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {value}")
+    return value
+
+
+class GridAction(argparse.Action):
+    """``--grid RES SIZE NEAR``: metres per pixel (float > 0), pixels per side (int >= 16) and
+    the nearest distance covered (metres, float); stored as a :class:`BevGrid`."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        res, size, near = values
+        try:
+            resolution, pixels, nearest = float(res), int(size), float(near)
+        except ValueError:
+            parser.error(f"{option_string} takes RES (metres per pixel), SIZE (whole pixels) and NEAR (metres), got {' '.join(values)}")
+        if not resolution > 0 or pixels < 16:
+            parser.error(f"{option_string} needs RES > 0 and SIZE >= 16, got {res} and {size}")
+        setattr(namespace, self.dest, BevGrid(resolution, (pixels, pixels), near=nearest))
+
+
+def grid_option(default: BevGrid) -> argparse.ArgumentParser:
+    """A parent parser with ``--grid RES SIZE NEAR`` (the BEV)."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument(
+        "--grid", nargs=3, action=GridAction, default=default, metavar=("RES", "SIZE", "NEAR"),
+        help="BEV: metres per pixel, pixels per side, nearest metres ahead",
+    )
+    return p
+
+
+def dataset_options(default_frames: int) -> argparse.ArgumentParser:
+    """A parent parser with the options that choose and load a dataset (:mod:`jbevo.data.catalog`)."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--dataset", choices=DATASETS, default="synthetic")
+    p.add_argument("--kitti-poses", type=Path, help="folder of KITTI pose files NN.txt (kitti-synthetic)")
+    p.add_argument("--kitti-root", type=Path, help="KITTI odometry root folder (kitti)")
+    p.add_argument("--frames", type=non_negative_int, default=default_frames,
+                   help="frames per sequence (synthetic; a cap for kitti-synthetic, 0 = all)")
+    p.add_argument("--town", choices=sorted(TOWNS), default="town01", help="synthetic world")
+    p.add_argument("--camera", choices=("small", "kitti"), default="small", help="kitti-synthetic camera: 128x416 or 376x1241")
+    return p
+
+
+def seed_option(default: int = 0, help: str = "random seed") -> argparse.ArgumentParser:
+    """A parent parser with ``--seed``."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--seed", type=int, default=default, help=help)
+    return p
+
+
+def optimizer_options(lr: float, epochs: int, window: int, batch: int) -> argparse.ArgumentParser:
+    """A parent parser with the training loop's options (:mod:`jbevo.training.loop`)."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument("--window", type=positive_int, default=window, help="training window length (frames)")
+    p.add_argument("--batch", type=positive_int, default=batch, help="windows per step (vmapped)")
+    p.add_argument("--epochs", type=positive_int, default=epochs)
+    p.add_argument("--lr", type=positive_float, default=lr, help="Adam learning rate (the parameters are logs)")
+    p.add_argument("--clip", type=positive_float, default=1.0, help="global gradient-norm clip")
+    p.add_argument("--yaw-weight", type=positive_float, default=10.0, help="metres per radian of yaw error in the loss")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/last.ckpt")
+    return p
+
+
+def parser(prog: str, doc: str | None, parents: Sequence[argparse.ArgumentParser] = ()) -> argparse.ArgumentParser:
+    """A command's parser: ``prog``, the module docstring as description, the parent parsers."""
+    return argparse.ArgumentParser(
+        prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter, parents=list(parents)
+    )
+
+
+def json_args(args: argparse.Namespace) -> dict:
+    """The parsed options as JSON values (paths and grids as text)."""
+    out = {}
+    for key, value in vars(args).items():
+        if callable(value):
+            continue
+        if isinstance(value, BevGrid):
+            value = {"resolution": value.resolution, "shape": list(value.shape), "origin": list(value.origin)}
+        elif isinstance(value, Path):
+            value = str(value)
+        out[key] = value
+    return out
+
+
+__all__ = [
+    "CommandError", "GridAction", "dataset_options", "grid_option", "json_args", "non_negative_int", "optimizer_options",
+    "parser", "positive_float", "positive_int", "reading", "run", "seed_option",
+]

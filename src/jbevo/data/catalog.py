@@ -1,0 +1,55 @@
+"""The datasets the command lines offer, by name: ``synthetic`` (procedural drives in the
+synthetic world), ``kitti-synthetic`` (the synthetic world driven by KITTI ground-truth motion)
+and ``kitti`` (a KITTI odometry folder)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from jbevo.data.sequence import Sequence
+from jbevo.data.synthetic.sequences import builtin_dataset, kitti_sequence, small_camera
+from jbevo.data.synthetic.world import World
+from jbevo.geometry.camera import Camera
+
+DATASETS = ("synthetic", "kitti-synthetic", "kitti")
+
+
+def load_sequences(
+    dataset: str,
+    names: list[str],
+    frames: int = 0,
+    kitti_poses: Path | None = None,
+    kitti_root: Path | None = None,
+    camera: str = "small",
+    town: str = "town01",
+    seed: int = 0,
+) -> list[Sequence]:
+    """The sequences ``names`` of ``dataset``. For ``synthetic``, ``names`` are seeds (one
+    procedural drive each, ``frames`` frames); for ``kitti-synthetic`` KITTI sequence names whose
+    pose files are in ``kitti_poses`` (``frames`` caps the length, 0 = all; ``camera`` small or
+    kitti); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is missing."""
+    if dataset == "synthetic":
+        return [builtin_dataset(frames, 1, town, int(n))[0] for n in names]
+    if dataset == "kitti-synthetic":
+        if kitti_poses is None:
+            raise ValueError("the kitti-synthetic dataset needs kitti_poses, the folder of KITTI pose files NN.txt")
+        from jbevo.eval.pose_files import read_kitti
+
+        world = World.create(town)
+        cam = small_camera() if camera == "small" else Camera.kitti()
+        out = []
+        for i, name in enumerate(names):
+            path = Path(kitti_poses) / f"{name}.txt"
+            if not path.is_file():
+                raise ValueError(f"no KITTI pose file {path}")
+            poses = read_kitti(path).poses
+            n = min(frames, len(poses) - 1) if frames else None
+            out.append(kitti_sequence(poses, 0, n, camera=cam, world=world, seed=seed + i))
+        return out
+    if dataset == "kitti":
+        if kitti_root is None:
+            raise ValueError("the kitti dataset needs kitti_root, a KITTI odometry folder")
+        from jbevo.data.kitti import read_odometry
+
+        return [read_odometry(kitti_root, n) for n in names]
+    raise ValueError(f"unknown dataset {dataset!r}; known: {DATASETS}")

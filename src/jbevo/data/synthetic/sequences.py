@@ -1,0 +1,132 @@
+"""Synthetic sequences: a trajectory, the world rendered by the camera along it under an imaging
+condition, and the IMU simulated from the same motion (``python -m jbevo.render`` writes one to
+disk).
+
+The built-in dataset of :func:`builtin_dataset` (what ``python -m jbevo.train`` uses with no
+arguments) is small procedural drives with a 128x416 camera (a KITTI camera 0 scaled by 1/3).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jbevo.data.sequence import Sequence, check
+from jbevo.data.synthetic.conditions import CONDITIONS, Condition, draw_obstacles, expose, place_obstacles
+from jbevo.data.synthetic.imu import ADIS16448, ImuNoise, simulate_imu
+from jbevo.data.synthetic.render import render
+from jbevo.data.synthetic.trajectories import kitti_drive, procedural_drive
+from jbevo.data.synthetic.world import World
+from jbevo.geometry.euler import rotation_zyx
+from jbevo.geometry.camera import Camera
+
+
+def small_camera(scale: float = 1 / 3, height: float = 1.65) -> Camera:
+    """KITTI camera 0 scaled by ``scale``, its size rounded up to multiples of 8 about the same
+    principal point (1/3: 128 x 416 pixels, the same field of view)."""
+    k = Camera.kitti()
+    full_h, full_w = k.image_shape
+    h, w = int(np.ceil(full_h * scale / 8) * 8), int(np.ceil(full_w * scale / 8) * 8)
+    fx, fy, cx, cy = (float(k.intrinsics[i, j]) * scale for i, j in ((0, 0), (1, 1), (0, 2), (1, 2)))
+    return Camera(fx, fy, cx + (w - full_w * scale) / 2, cy + (h - full_h * scale) / 2, (h, w), height)
+
+
+@functools.partial(jax.jit, static_argnames=("condition",))
+def _frames(world, camera, poses, times, obstacles, keys, condition: Condition):
+    def one(args):
+        pose, time, key = args
+        image = render(world, camera, pose, condition.haze_distance, condition.sheen)
+        if obstacles is not None:
+            image = draw_obstacles(image, camera, pose, obstacles, time)
+        return expose(image, condition, key)
+
+    return jax.lax.map(one, (poses, times, keys), batch_size=2)
+
+
+def make_sequence(
+    world: World,
+    camera: Camera,
+    frame_times: np.ndarray,
+    body_poses: np.ndarray,
+    condition: Condition | str = "day",
+    imu_noise: ImuNoise = ADIS16448,
+    seed: int = 0,
+    imu_rate: float = 100.0,
+    smoothing: float | None = None,
+) -> Sequence:
+    """Render and simulate a drive given at evenly spaced ``frame_times`` (``T + 1`` poses,
+    ``T_world_body``). The first frame only starts the IMU (block 0 of the result holds the
+    samples between it and the second); the result has ``T`` frames. ``smoothing`` is the IMU
+    simulator's spline penalty (``None`` for smooth procedural motion, 0.01 for recorded poses);
+    the ground truth and the images follow the (smoothed) simulated motion.
+    """
+    frame_times = np.asarray(frame_times, float)
+    body_poses = np.asarray(body_poses, float)
+    if isinstance(condition, str):
+        if condition not in CONDITIONS:
+            raise ValueError(f"unknown condition {condition!r}; known: {sorted(CONDITIONS)}")
+        condition = CONDITIONS[condition]
+    if len(frame_times) < 2 or body_poses.shape != (len(frame_times), 4, 4):
+        raise ValueError(f"need >= 2 frame times and poses of shape (N, 4, 4); got {frame_times.shape}, {body_poses.shape}")
+    interval = np.diff(frame_times)
+    samples = interval[0] * imu_rate
+    if not np.allclose(interval, interval[0], rtol=1e-6) or abs(samples - round(samples)) > 1e-6:
+        raise ValueError("frame_times must be evenly spaced by a whole number of IMU samples")
+    s = int(round(samples))
+    imu = simulate_imu(frame_times, body_poses, imu_rate, imu_noise, seed, smoothing)
+    t = len(frame_times) - 1
+    poses = np.tile(np.eye(4), (t, 1, 1))
+    poses[:, :3, :3] = rotation_zyx(imu.frame_euler[1:])
+    poses[:, :3, 3] = imu.frame_position[1:]
+    obstacles = place_obstacles(poses, condition.obstacles, seed) if condition.obstacles else None
+    keys = jax.random.split(jax.random.PRNGKey(seed), t)
+    times = jnp.asarray(frame_times[1:] - frame_times[0], jnp.float32)
+    images = _frames(world, camera, jnp.asarray(poses, jnp.float32), times, obstacles, keys, condition)
+    block = (t, s)
+    seq = Sequence(
+        images=images,
+        frame_times=jnp.asarray(frame_times[1:], jnp.float32),
+        imu_times=jnp.asarray(imu.times.reshape(block), jnp.float32),
+        gyro=jnp.asarray(imu.gyro.reshape(*block, 3), jnp.float32),
+        accel=jnp.asarray(imu.accel.reshape(*block, 3), jnp.float32),
+        camera=camera,
+        poses=jnp.asarray(poses, jnp.float32),
+    )
+    return check(seq)
+
+
+def procedural_sequence(
+    seed: int, frames: int, town: str = "town01", camera: Camera | None = None, condition: Condition | str = "day",
+    imu_noise: ImuNoise = ADIS16448, world: World | None = None,
+) -> Sequence:
+    """A procedural drive of ``frames`` frames (10 Hz) in ``town``."""
+    world = World.create(town) if world is None else world
+    camera = small_camera() if camera is None else camera
+    times, poses = procedural_drive(seed, frames + 1)
+    return make_sequence(world, camera, times, poses, condition, imu_noise, seed)
+
+
+def kitti_sequence(
+    kitti_poses: np.ndarray, start: int = 0, frames: int | None = None, town: str = "town01",
+    camera: Camera | None = None, condition: Condition | str = "day", imu_noise: ImuNoise = ADIS16448,
+    seed: int = 0, world: World | None = None,
+) -> Sequence:
+    """The synthetic world driven by real KITTI motion (``T_world_cam0`` poses, e.g. read with
+    :func:`jbevo.eval.pose_files.read_kitti`): frames ``[start, start + frames)`` (all by default)."""
+    world = World.create(town) if world is None else world
+    camera = Camera.kitti() if camera is None else camera
+    times, poses = kitti_drive(kitti_poses)
+    stop = len(poses) if frames is None else start + frames + 1
+    if start < 0 or stop > len(poses) or stop - start < 2:
+        raise ValueError(f"frames [{start}, {stop - 1}) do not fit a trajectory of {len(poses)} poses (one extra starts the IMU)")
+    return make_sequence(world, camera, times[start:stop], poses[start:stop], condition, imu_noise, seed, smoothing=0.01)
+
+
+def builtin_dataset(frames: int = 120, sequences: int = 6, town: str = "town01", seed: int = 0) -> list[Sequence]:
+    """The embedded default dataset: ``sequences`` procedural drives of ``frames`` frames, small
+    camera, ADIS16448 IMU, day; seeds ``seed, seed + 1, ...``."""
+    world = World.create(town)
+    return [procedural_sequence(seed + i, frames, town, world=world) for i in range(sequences)]

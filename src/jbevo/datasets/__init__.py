@@ -1,1 +1,0 @@
-"""Datasets: simulators and readers that produce sequences for the models."""

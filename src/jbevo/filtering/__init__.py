@@ -1,0 +1,36 @@
+"""Filtering: the unscented transform, the unscented Kalman filter as pure JAX functions (``jit``,
+``vmap``, ``grad``; exact missing-data handling), learnable noise covariances, the planar pose
+model, and the small dense linear algebra they run on.
+
+Example::
+
+    import jax.numpy as jnp
+    from jbevo.filtering import DiagonalCovariance, GaussianState, planar_pose_model, ukf
+
+    q = DiagonalCovariance.from_std(jnp.array([0.02, 0.01, 0.005]))
+    r = DiagonalCovariance.from_std(jnp.array([0.5, 0.5, 0.05]))
+    result = ukf.filter(planar_pose_model(), GaussianState(jnp.zeros(3), 0.1 * jnp.eye(3)), increments, fixes, q(), r())
+"""
+
+from jbevo.filtering import linalg, noise, planar, ukf, unscented
+from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
+from jbevo.filtering.planar import planar_pose_model
+from jbevo.filtering.ukf import FilterResult, GaussianState, StateSpaceModel, filter_blocks, linear_update, predict, update
+from jbevo.filtering.unscented import (
+    Julier,
+    MerweScaled,
+    SigmaWeights,
+    UnscentedResult,
+    circular_mean_fn,
+    sigma_points,
+    unscented_transform,
+    wrapped_add_fn,
+    wrapped_residual_fn,
+)
+
+__all__ = [
+    "CholeskyCovariance", "DiagonalCovariance", "FilterResult", "GaussianState", "Julier", "MerweScaled", "SigmaWeights",
+    "StateSpaceModel", "UnscentedResult", "circular_mean_fn", "filter_blocks", "linalg", "linear_update", "noise", "planar",
+    "planar_pose_model", "predict", "sigma_points", "ukf", "unscented", "unscented_transform", "update", "wrapped_add_fn",
+    "wrapped_residual_fn",
+]

@@ -1,0 +1,85 @@
+"""The optimisation loop that ``python -m jbevo.train`` and ``python -m jbevo.localize train``
+share: the optimizer and progress (or a resumed run), a jitted Adam step over vmapped windows,
+one shuffled epoch with a progress bar, and the best/last checkpoints."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import numpy as np
+import optax
+from tqdm import tqdm
+
+from jbevo.training import checkpoint
+
+
+def make_step(static: Any, optimizer: optax.GradientTransformation, loss: Callable[[Any, Any], jax.Array]):
+    """A jitted ``step(params, opt_state, batch) -> (params, opt_state, loss)`` for
+    ``loss(model, batch)``, the model being ``eqx.combine(params, static)``."""
+
+    @eqx.filter_jit
+    def step(params, opt_state, batch):
+        value, grads = jax.value_and_grad(lambda p: loss(eqx.combine(p, static), batch))(params)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, value
+
+    return step
+
+
+class TrainingDiverged(RuntimeError):
+    """The loss became NaN or infinite."""
+
+
+def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.Generator, label: str):
+    """One pass over the ``windows`` (a batched pytree) in shuffled batches of ``batch``:
+    ``(params, opt_state, mean loss, steps)``. A non-finite loss raises :class:`TrainingDiverged`."""
+    n = jax.tree_util.tree_leaves(windows)[0].shape[0]
+    order = rng.permutation(n)
+    steps = max(1, n // batch)
+    bar = tqdm(range(steps), desc=label, file=sys.stderr, leave=False, disable=None)
+    losses = []
+    for i in bar:
+        idx = order[i * batch : (i + 1) * batch]
+        chunk = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows)
+        params, opt_state, loss = step(params, opt_state, chunk)
+        if not np.isfinite(float(loss)):
+            raise TrainingDiverged(f"the loss became {float(loss)} at {label}, step {i}; lower the learning rate")
+        losses.append(float(loss))
+        bar.set_postfix(loss=f"{np.mean(losses[-10:]):.5f}")
+    return params, opt_state, float(np.mean(losses)), steps
+
+
+def start_run(model, out, lr: float, clip: float, resume: bool, best_key: str):
+    """The Adam optimizer (gradient clipped at global norm ``clip``) and its state for ``model``,
+    and the progress record; with ``resume``, all three from ``out/last.ckpt`` (which must hold
+    a model of ``model``'s type). Returns ``(model, params, static, optimizer, opt_state,
+    progress)``; ``progress[best_key]`` holds the best validation criterion so far."""
+    optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
+    params, static = eqx.partition(model, eqx.is_inexact_array)
+    opt_state = optimizer.init(params)
+    progress = {"epoch": 0, "step": 0, best_key: None, "history": []}
+    out.mkdir(parents=True, exist_ok=True)
+    if resume:
+        loaded, opt_state, progress = checkpoint.load(out / "last.ckpt", opt_state)
+        if type(loaded) is not type(model):
+            raise ValueError(f"{out / 'last.ckpt'} holds a {type(loaded).__name__}, not a {type(model).__name__}")
+        model = loaded
+        params, static = eqx.partition(model, eqx.is_inexact_array)
+        print(f"resumed from {out / 'last.ckpt'} at epoch {progress['epoch']}")
+    return model, params, static, optimizer, opt_state, progress
+
+
+def save_epoch(out, model, opt_state, progress: dict, best_key: str, criterion: float) -> None:
+    """``out/last.ckpt`` always, ``out/best.ckpt`` when ``criterion`` beats ``progress[best_key]``
+    (lower is better; both atomic)."""
+    if progress[best_key] is None or criterion < progress[best_key]:
+        progress[best_key] = criterion
+        checkpoint.save(out / "best.ckpt", model, opt_state, progress)
+    checkpoint.save(out / "last.ckpt", model, opt_state, progress)
+
+
+__all__ = ["TrainingDiverged", "make_step", "run_epoch", "save_epoch", "start_run"]

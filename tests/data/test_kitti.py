@@ -1,0 +1,86 @@
+"""KITTI odometry and raw layouts: a tiny exported synthetic sequence read back (the loaders'
+fixture), and clear errors for broken folders."""
+
+import numpy as np
+import pytest
+
+from jbevo.data import kitti
+from jbevo.data.synthetic.sequences import procedural_sequence
+from jbevo.data.synthetic.world import World
+from jbevo.geometry import camera as cam
+
+
+@pytest.fixture(scope="module")
+def seq():
+    camera = cam.Camera(60.0, 60.0, 47.5, 15.5, (32, 96), 1.65)
+    return procedural_sequence(7, 12, camera=camera, world=World.create("town02", size=256))
+
+
+def _relative(poses):
+    poses = np.asarray(poses, float)
+    return np.linalg.inv(poses[0]) @ poses
+
+
+def test_odometry_round_trip(seq, tmp_path):
+    kitti.write_odometry(seq, tmp_path, "03")
+    back = kitti.read_odometry(tmp_path, "03")
+    np.testing.assert_array_equal(back.images, seq.images)
+    np.testing.assert_allclose(back.frame_times, seq.frame_times, rtol=1e-6)
+    np.testing.assert_allclose(back.camera.intrinsics, seq.camera.intrinsics, rtol=1e-6)
+    np.testing.assert_allclose(_relative(back.poses), _relative(seq.poses), atol=1e-5)
+    assert back.gyro.shape == (12, 1, 3) and bool(np.all(np.isnan(back.gyro)))
+
+
+def test_raw_round_trip(seq, tmp_path):
+    drive = tmp_path / "2011_09_26" / "2011_09_26_drive_0001_sync"
+    kitti.write_raw(seq, drive)
+    back = kitti.read_raw(drive)
+    np.testing.assert_array_equal(back.images, seq.images)
+    np.testing.assert_allclose(back.frame_times - back.frame_times[0], seq.frame_times - seq.frame_times[0], atol=1e-4)
+    np.testing.assert_allclose(back.gyro[:, 0], seq.gyro[:, -1], atol=1e-6)
+    np.testing.assert_allclose(back.accel[:, 0], seq.accel[:, -1], atol=1e-5)
+    # GPS/INS ground truth through the Mercator projection: millimetres over the drive
+    np.testing.assert_allclose(_relative(back.poses)[:, :3, 3], _relative(seq.poses)[:, :3, 3], atol=5e-3)
+    np.testing.assert_allclose(_relative(back.poses)[:, :3, :3], _relative(seq.poses)[:, :3, :3], atol=1e-5)
+
+
+def test_raw_reader_groups_100_hz_oxts_into_frame_blocks(seq, tmp_path):
+    drive = tmp_path / "d" / "drive_sync"
+    kitti.write_raw(seq, drive)
+    # Re-time the OXTS records as three samples per frame interval by duplicating them.
+    lines = (drive / "oxts" / "timestamps.txt").read_text().splitlines()
+    data = sorted((drive / "oxts" / "data").glob("*.txt"))
+    times = [kitti._timestamps(drive / "oxts" / "timestamps.txt")[i] for i in range(len(lines))]
+    for f in data:
+        f.unlink()
+    stamps = []
+    for i, t in enumerate(times):
+        for j, dt in enumerate((-0.066, -0.033, 0.0)):
+            n = 3 * i + j
+            (drive / "oxts" / "data" / f"{n:010d}.txt").write_text(" ".join(["49.0", "8.4"] + ["0"] * 28))
+            stamps.append(kitti._format_time(t + dt))
+    (drive / "oxts" / "timestamps.txt").write_text("\n".join(stamps) + "\n")
+    back = kitti.read_raw(drive)
+    assert back.gyro.shape == (12, 3, 3)
+    assert bool(np.all(np.isfinite(back.gyro)))
+
+
+def test_errors_name_the_file(seq, tmp_path):
+    with pytest.raises(FileNotFoundError, match="sequences"):
+        kitti.read_odometry(tmp_path, "00")
+    kitti.write_odometry(seq, tmp_path, "00")
+    times = tmp_path / "sequences" / "00" / "times.txt"
+    times.write_text("\n".join(times.read_text().splitlines()[:-1]) + "\n")
+    with pytest.raises(ValueError, match="12 images but 11 times"):
+        kitti.read_odometry(tmp_path, "00")
+    kitti.write_odometry(seq, tmp_path, "00")
+    (tmp_path / "poses" / "00.txt").write_text("1 2 3\n")
+    with pytest.raises(ValueError, match="expected 12 numbers"):
+        kitti.read_odometry(tmp_path, "00")
+    drive = tmp_path / "x" / "drive"
+    kitti.write_raw(seq, drive)
+    stamps = drive / "oxts" / "timestamps.txt"
+    lines = stamps.read_text().splitlines()
+    stamps.write_text("\n".join([lines[1], lines[0], *lines[2:]]) + "\n")
+    with pytest.raises(ValueError, match="increasing"):
+        kitti.read_raw(drive)
