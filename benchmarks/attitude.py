@@ -17,7 +17,7 @@ attitude at frame 0.
   the same way. The planar body-frame velocity v stands in
   for the odometry's: the true one (world velocity turned by the yaw) plus N(0, ``--speed-noise``)
   per axis and frame; w is the frame's mean gyro.
-* speed-aided (BEVO's filter, :class:`jbevo.attitude.SpeedAidedAttitude`): the forward
+* speed-aided (BEVO's filter, :class:`jbevo.inertial.speed_aided.SpeedAidedAttitude`): the forward
   accelerometer integrated into a speed state that the stand-in's forward speed measures, roll
   from the lateral tilt; hand-set and learned the same way.
 
@@ -54,14 +54,13 @@ import numpy as np   # noqa: E402
 import optax   # noqa: E402
 
 from jbevo.inertial.attitude_filter import AttitudeFilter, integrate_gyro  # noqa: E402
-from jbevo.inertial.speed_aided import SpeedAidedAttitude  # noqa: E402
+from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude  # noqa: E402
 from jbevo.inertial.kinematics import tilt_measurements  # noqa: E402
 from jbevo.data.kitti_frames import body_poses_from_kitti   # noqa: E402
 from jbevo.data.synthetic.imu import ADIS16448, planar_body_velocity, simulate_imu   # noqa: E402
 from jbevo.inertial.kinematics import GRAVITY   # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
 from jbevo.eval import pose_files as trajectory_io
-from jbevo.filtering import ukf
 
 TRAIN = [f"{i:02d}" for i in range(9)]
 TEST = ["09", "10"]
@@ -148,16 +147,14 @@ def train(f: AttitudeFilter, data: dict, compensated: bool, steps: int, lr: floa
 def run_speed_aided(f: SpeedAidedAttitude, gyro, accel, initial, velocity):
     """The speed-aided filter (BEVO's) over one window, measuring the odometry stand-in's forward
     speed, from the true initial attitude and speed."""
-    mean = jnp.concatenate([initial, jnp.zeros(3, initial.dtype), velocity[:1, 0]])
-    cov = jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * 3 + [0.1**2], initial.dtype))
+    start = AttitudeState.initial(initial, velocity[0, 0], 0.03, 0.005, 0.1)
 
     def step(state, x):
         g, a, v = x
-        state = f.update(f.predict(state, g, a), g, a, v)
-        state = jax.tree_util.tree_map(lambda q, r: q.astype(r.dtype), state, ukf.GaussianState(mean, cov))
-        return state, state.mean[:2]
+        state = f.update_lateral_tilt(f.update_speed(f.predict(state, g, a), v), g, a).astype(initial.dtype)
+        return state, state.pitch_roll
 
-    return jax.lax.scan(step, ukf.GaussianState(mean, cov), (gyro, accel, velocity[:, 0]))[1]
+    return jax.lax.scan(step, start, (gyro, accel, velocity[:, 0]))[1]
 
 
 def train_speed_aided(f: SpeedAidedAttitude, data: dict, steps: int, lr: float) -> tuple[SpeedAidedAttitude, list]:

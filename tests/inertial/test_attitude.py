@@ -10,7 +10,6 @@ import pytest
 from jbevo.data.synthetic.imu import ADIS16448, planar_body_velocity, simulate_imu
 from jbevo.geometry.euler import body_rates, rotation_zyx
 from jbevo.inertial.kinematics import GRAVITY
-from jbevo.filtering import ukf as _ukf
 from jbevo.inertial.attitude_filter import AttitudeFilter
 from jbevo.inertial.kinematics import accel_tilt, euler_rates, tilt_measurements
 
@@ -117,7 +116,7 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
     """Fed the true speed, the speed-aided filter keeps pitch and roll within a few tenths of a
     degree on a procedural drive that starts at rest and accelerates at up to 2 m/s^2, where the
     accelerometer's own tilt is off by degrees."""
-    from jbevo.inertial.speed_aided import SpeedAidedAttitude
+    from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
     from jbevo.data.synthetic.imu import ADIS16448, simulate_imu
     from jbevo.data.synthetic.trajectories import procedural_drive
 
@@ -130,17 +129,15 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
     truth = imu.frame_euler[1:, 1:]
     f = SpeedAidedAttitude.create(0.01)
     first = np.asarray(accel[0]).mean(0)
-    state = _ukf.GaussianState(
-        jnp.asarray([-np.arctan2(first[0], np.hypot(first[1], first[2])), np.arctan2(first[1], first[2]), 0, 0, 0, 0], jnp.float32),
-        jnp.diag(jnp.asarray([0.03**2] * 2 + [0.005**2] * 3 + [0.01], jnp.float32)),
-    )
+    tilt0 = jnp.asarray([-np.arctan2(first[0], np.hypot(first[1], first[2])), np.arctan2(first[1], first[2])], jnp.float32)
+    state = AttitudeState.initial(tilt0, jnp.float32(0.0), 0.03, 0.005, 0.1)
 
     @jax.jit
     def run(state):
         def step(st, x):
             g, a, v = x
-            st = jax.tree_util.tree_map(lambda q: q.astype(jnp.float32), f.update(f.predict(st, g, a), g, a, v))
-            return st, st.mean[:2]
+            st = f.update_lateral_tilt(f.update_speed(f.predict(st, g, a), v), g, a).astype(jnp.float32)
+            return st, st.pitch_roll
         return jax.lax.scan(step, state, (gyro, accel, jnp.asarray(speed, jnp.float32)))[1]
 
     estimate = np.asarray(run(state))

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from tests.helpers import check_leaf_gradients
 
-from jbevo.vision.bands import BIAS_Y, PITCH, BandGeometry, band_moments
+from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
+from jbevo.vision.bands import BandGeometry, band_moments
 from jbevo.data.synthetic.imu import NOISELESS
 from jbevo.data.synthetic.sequences import make_sequence, procedural_sequence, small_camera
 from jbevo.geometry.euler import poses_from_euler
@@ -20,7 +21,6 @@ from jbevo.vision.bev import feathered_bev
 from jbevo.models.losses import motion_loss
 from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.registration import register
-from jbevo.filtering import ukf
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.geometry.camera import Camera
 from jbevo.vision.bev import bev_increment
@@ -110,9 +110,16 @@ def test_a_roll_error_false_turn_is_corrected(moving):
 
 
 def _state(pitch, bias_std=0.05):
-    mean = jnp.zeros(6).at[PITCH].set(pitch).at[5].set(10.0)
+    state = AttitudeState.initial(jnp.asarray([pitch, 0.0]), jnp.asarray(10.0), np.radians(0.5), 1e-2, 1.0)
     cov = jnp.diag(jnp.asarray([np.radians(0.5) ** 2, 1e-4, 1e-4, bias_std**2, 1e-4, 1.0]))
-    return ukf.GaussianState(mean, cov)
+    return state._replace(cov=cov)
+
+
+def _update(bands, state, shifts, use):
+    """The bands' slope measurement applied to the attitude belief, as BEVO applies it."""
+    m = bands.slope_measurement(shifts, GRID, DPC, jnp.asarray(H), 0.1)
+    h = AttitudeState.row(pitch=m.pitch, pitch_rate_bias=m.pitch_rate_bias, dtype=state.mean.dtype)
+    return SpeedAidedAttitude.update_linear(state, h, m.value, m.variance, jnp.asarray(use) & m.valid)
 
 
 def test_the_update_pulls_the_pitch_toward_the_truth(moving):
@@ -121,10 +128,10 @@ def test_the_update_pulls_the_pitch_toward_the_truth(moving):
     e = np.radians(0.5)
     _, shifts = pair(moving, (e, 0.0), (e, 0.0))
     bands = BandGeometry.create()
-    new = bands.update_attitude(_state(e, bias_std=1e-4), shifts, GRID, DPC, jnp.asarray(H), 0.1, jnp.asarray(True))
-    assert abs(float(new.mean[PITCH])) < 0.3 * e
-    skipped = bands.update_attitude(_state(e), shifts, GRID, DPC, jnp.asarray(H), 0.1, jnp.asarray(False))
-    assert float(skipped.mean[PITCH]) == e
+    new = _update(bands, _state(e, bias_std=1e-4), shifts, True)
+    assert abs(float(new.pitch)) < 0.3 * e
+    skipped = _update(bands, _state(e), shifts, False)
+    assert float(skipped.pitch) == e
 
 
 def test_a_pitch_drift_at_standstill_reads_as_gyro_bias(standing):
@@ -133,10 +140,10 @@ def test_a_pitch_drift_at_standstill_reads_as_gyro_bias(standing):
     ``0.2 deg / 0.1 s`` too high."""
     drift = np.radians(0.2)
     _, shifts = pair(standing, (drift, 0.0), (0.0, 0.0))
-    new = BandGeometry.create().update_attitude(_state(0.0), shifts, GRID, DPC, jnp.asarray(H), 0.1, jnp.asarray(True))
+    new = _update(BandGeometry.create(), _state(0.0), shifts, True)
     # b_hat - b = drift / T: the update lowers the bias estimate by about that much.
-    assert -2.0 * drift / 0.1 < float(new.mean[BIAS_Y]) < -0.5 * drift / 0.1
-    assert abs(float(new.mean[PITCH])) < np.radians(0.05)
+    assert -2.0 * drift / 0.1 < float(new.pitch_rate_bias) < -0.5 * drift / 0.1
+    assert abs(float(new.pitch)) < np.radians(0.05)
 
 
 def test_bevo_with_bands_corrects_a_wrong_pitch(world):
@@ -148,12 +155,13 @@ def test_bevo_with_bands_corrects_a_wrong_pitch(world):
     def final_pitch_error(bands):
         model = Bevo.create(GRID, seq.imu_dt, bands=bands, n_angles=256)
         carry, frames, seq_ = model.start(seq, warm_start=True)
-        mean = carry.attitude.mean.at[PITCH].add(np.radians(0.4))
-        cov = carry.attitude.cov.at[PITCH, PITCH].set(np.radians(0.4) ** 2)
-        carry = carry._replace(attitude=ukf.GaussianState(mean, cov))
+        h = AttitudeState.row(pitch=1.0, dtype=carry.attitude.mean.dtype)
+        old = carry.attitude
+        extra = np.radians(0.4) ** 2 - float(old.cov @ h @ h)
+        carry = carry._replace(attitude=AttitudeState(old.mean + np.radians(0.4) * h, old.cov + extra * jnp.outer(h, h)))
         step = jax.jit(lambda c, f: model.step(c, f, seq_.camera, model.frame_dt(seq_)))
-        _, (_, pitch_roll, _, _) = jax.lax.scan(step, carry, frames)
-        return abs(float(pitch_roll[-1, 0] - seq.pitch_roll[-1, 0]))
+        _, out = jax.lax.scan(step, carry, frames)
+        return abs(float(out.pitch_roll[-1, 0] - seq.pitch_roll[-1, 0]))
 
     assert final_pitch_error(True) < np.radians(0.1)
     assert final_pitch_error(False) > np.radians(0.3)

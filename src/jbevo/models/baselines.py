@@ -21,8 +21,8 @@ def map_matching_alone(model: BevoPlus, seq: Sequence, map_: Map) -> jax.Array:
 
     def step(carry, frame):
         odo_carry, pose = carry
-        odo_carry, (_, pitch_roll, _, _) = odo.step(odo_carry, frame, seq.camera, frame_dt)
-        match = model.match(frame[0], pitch_roll, seq.camera, map_, pose)
+        odo_carry, row = odo.step(odo_carry, frame, seq.camera, frame_dt)
+        match = model.match(frame.image, row.pitch_roll, seq.camera, map_, pose)
         ok = (match.confidence >= model.min_confidence) & jnp.all(jnp.isfinite(match.fix))
         pose = jnp.where(ok, match.fix, pose).astype(pose.dtype)
         return (odo_carry, pose), pose

@@ -1,7 +1,8 @@
 """BEVO: the pitch/roll DUKF, the gravity-aligned BEV and DPC composed into one differentiable
 recursion over a sequence's frames (one ``lax.scan``; ``vmap`` over sequences).
 
-Per frame ``t`` (:meth:`Bevo.step`):
+Per frame ``t`` (:meth:`Bevo.step`: :meth:`Bevo.observe`, then :meth:`Bevo.advance`), on one
+attitude belief (:class:`jbevo.inertial.speed_aided.AttitudeState`):
 
 1. **Attitude.** The speed-aided pitch/roll UKF (:class:`jbevo.inertial.speed_aided.SpeedAidedAttitude`:
    pitch, roll, gyro bias and forward speed) is predicted through the frame's gyro and
@@ -11,8 +12,8 @@ Per frame ``t`` (:meth:`Bevo.step`):
    of the valid ones and the view's edge is feathered (``feather`` pixels), so the edge, the same
    in every frame, does not pull the correlation toward zero motion.
 3. **DPC.** :func:`jbevo.vision.registration.register` between the previous and the current BEV; the
-   resulting forward speed and the accelerometer's lateral tilt update the attitude filter
-   (the BEV of this frame used the prediction; the update serves the next frames).
+   resulting forward speed, then the accelerometer's lateral tilt, update the attitude belief
+   (the BEV of this frame used the prediction; the updates serve the next frames).
 4. **Metric motion.** :func:`jbevo.vision.bev.bev_increment` turns DPC's ``(rotation, t)`` into the
    body-frame increment ``(dx, dy, dyaw)`` (tested against ground truth). Poses compose with :func:`jbevo.geometry.se2.se2_compose`.
 
@@ -46,49 +47,87 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int, UInt8
 
 from jbevo.data.sequence import Sequence
-from jbevo.filtering import ukf
-from jbevo.geometry.se2 import se2_compose
-from jbevo.inertial.kinematics import GRAVITY, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements
-from jbevo.inertial.speed_aided import SpeedAidedAttitude
-from jbevo.models.parameters import num_learnable
-from jbevo.vision.bands import BIAS_Y, BandGeometry
 from jbevo.geometry.bev_grid import BevGrid
-from jbevo.vision.bev import bev_increment, feathered_bev
 from jbevo.geometry.camera import Camera
+from jbevo.geometry.se2 import se2_compose
+from jbevo.inertial.kinematics import GRAVITY, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements, valid_mean
+from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
+from jbevo.models.parameters import num_learnable
+from jbevo.vision.bands import BandGeometry
+from jbevo.vision.bev import bev_increment, feathered_bev
 from jbevo.vision.dpc_params import DPCParams
-from jbevo.vision.registration import register
+from jbevo.vision.registration import Registration, register
+
+ATTITUDE_SOURCES = ("filter", "zero", "accel", "truth")
+
+
+class Frame(NamedTuple):
+    """One frame of a sequence as the recursion scans it (leading axis ``T`` when batched)."""
+
+    image: UInt8[Array, "H W"]  #: the camera image, 8 bit
+    gyro: Float[Array, "S 3"]  #: the IMU block that ends at this frame (rad/s; NaN rows: missing)
+    accel: Float[Array, "S 3"]  #: its specific force (m/s^2)
+    true_pitch_roll: Float[Array, " 2"]  #: the ground truth's (used by ``attitude_source="truth"`` only)
+    index: Int[Array, ""]  #: the frame's index in the sequence (0: no previous BEV)
 
 
 class BevoCarry(NamedTuple):
     """What the recursion carries from frame to frame."""
 
-    attitude: ukf.GaussianState  #: the speed-aided attitude filter's belief
+    attitude: AttitudeState  #: the speed-aided attitude filter's belief
     bev: Float[Array, "h w"]  #: the previous frame's (feathered) BEV
     pose: Float[Array, " 3"]  #: the planar pose (x, y, yaw)
 
 
+class Observation(NamedTuple):
+    """What one frame's odometry measured (:meth:`Bevo.observe`)."""
+
+    attitude: AttitudeState  #: the belief after the frame's measurement updates
+    pitch_roll: Float[Array, " 2"]  #: the attitude the frame's BEV was projected with
+    bev: Float[Array, "h w"]  #: that BEV
+    increment: Float[Array, " 3"]  #: (dx, dy, dyaw) from the previous frame (body frame; 0 at frame 0)
+    confidence: Float[Array, ""]  #: DPC's confidence (0 at frame 0)
+
+
 class BevoOutput(NamedTuple):
+    """BEVO's output per frame (leading axis ``T``)."""
+
     increments: Float[Array, "T 3"]  #: (dx, dy, dyaw) from frame t-1 to t, body frame of t-1
-    pitch_roll: Float[Array, "T 2"]
+    pitch_roll: Float[Array, "T 2"]  #: the attitude each BEV was projected with
     confidence: Float[Array, " T"]  #: DPC confidence (0 for frame 0)
     poses: Float[Array, "T 3"]  #: (x, y, yaw), from the initial pose
 
 
 class Bevo(eqx.Module):
     """The BEVO odometry model: learnable ``attitude`` (Q, R) and ``dpc`` parameters, a static
-    BEV ``grid``. ``feather`` (pixels) softens the edge of the camera's view in the BEV;
-    ``attitude_source`` picks the pitch/roll that project the BEV: ``"filter"`` (BEVO),
-    ``"zero"`` (no IMU), ``"accel"`` (the raw accelerometer tilt) or ``"truth"`` (the sequence's
-    ground truth, an upper bound). ``gyro_window`` (radians; 0: off) searches DPC's rotation
-    only within that distance of the gyro's yaw increment over the frame
-    (:func:`jbevo.registration.register`'s ``rotation_prior``): no gross rotation outliers on
-    faint, noisy images (night), at the cost of trusting the gyro to that window. ``bands``
-    (:class:`jbevo.bands.BandGeometry`, or None: off) refines each frame with the near and far
-    halves of the BEV pair: a measurement of the pitch and the pitch-rate bias, the forward
-    motion free of the pitch error, and the yaw free of the roll error.
+    BEV ``grid``.
+
+    Attributes:
+        attitude: the speed-aided attitude filter's noise (:class:`SpeedAidedAttitude`).
+        dpc: DPC's parameters.
+        grid: the BEV raster (static).
+        feather: pixels over which the edge of the camera's view in the BEV fades to its mean.
+        attitude_source: the pitch/roll that project the BEV: ``"filter"`` (BEVO), ``"zero"``
+            (no IMU), ``"accel"`` (the raw accelerometer tilt) or ``"truth"`` (the sequence's ground
+            truth, an upper bound).
+        gyro_window: radians (0: off); DPC's rotation is searched only within that distance of
+            the gyro's yaw increment over the frame (:func:`jbevo.vision.registration.register`'s
+            ``rotation_prior``): no gross rotation outliers on faint, noisy images (night), at the
+            cost of trusting the gyro to that window.
+        bands: :class:`jbevo.vision.bands.BandGeometry`, or None (off): the near and far halves
+            of the BEV pair measure the pitch and the pitch-rate bias, give the forward motion free
+            of the pitch error and the yaw free of the roll error.
+
+    Example::
+
+        >>> from jbevo.data.synthetic import procedural_sequence
+        >>> seq = procedural_sequence(seed=0, frames=20)                 # doctest: +SKIP
+        >>> out = Bevo.create()(seq)                                     # doctest: +SKIP
+        >>> out.poses.shape                                              # doctest: +SKIP
+        (20, 3)
     """
 
     attitude: SpeedAidedAttitude
@@ -105,9 +144,10 @@ class Bevo(eqx.Module):
         gyro_window: float = 0.0, bands: bool = False, **dpc_kwargs,
     ) -> Bevo:
         """Hand-set defaults: :meth:`SpeedAidedAttitude.create`, DPC's defaults with 256
-        angles, and with ``bands`` :meth:`BandGeometry.create`."""
-        if attitude_source not in ("filter", "zero", "accel", "truth"):
-            raise ValueError(f"attitude_source must be filter, zero, accel or truth, got {attitude_source!r}")
+        angles, a 128 x 128 BEV at 0.1 m from 7.5 m ahead, and with ``bands``
+        :meth:`BandGeometry.create`."""
+        if attitude_source not in ATTITUDE_SOURCES:
+            raise ValueError(f"attitude_source must be one of {ATTITUDE_SOURCES}, got {attitude_source!r}")
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
         dpc_kwargs.setdefault("n_angles", 256)
         return cls(
@@ -119,97 +159,122 @@ class Bevo(eqx.Module):
         """Number of learnable scalars."""
         return num_learnable(self)
 
+    def frame_dt(self, seq: Sequence) -> float:
+        """Seconds between frames: the IMU interval times the samples per frame."""
+        return self.attitude.dt * seq.gyro.shape[-2]
+
+    # ------------------------------------------------------------------ the recursion's start
+
     def start(
         self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False
-    ) -> tuple[BevoCarry, tuple, Sequence]:
-        """The recursion's initial carry, the per-frame inputs to scan over and the sequence cast
-        to the working dtype (float32, or float64 under ``jax_enable_x64``); see :meth:`__call__`."""
+    ) -> tuple[BevoCarry, Frame, Sequence]:
+        """The recursion's initial carry, the frames to scan over and the sequence cast to the
+        working dtype (float32, or float64 under ``jax_enable_x64``); see :meth:`__call__`."""
         if seq.images.ndim != 3:
             raise ValueError(f"Bevo runs on one sequence (images (T, H, W)); got images {seq.images.shape}: use jax.vmap")
         if initial_pose is None:
             initial_pose = jnp.nan_to_num(seq.planar[0])
         dtype = jnp.result_type(float)
         seq = eqx.tree_at(lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype)))
-        # The state the first step starts from is the one before frame 0's IMU block (a frame
-        # earlier): the first step integrates that block to reach frame 0.
-        dt = self.frame_dt(seq)
-        gyro0 = jnp.where(jnp.isfinite(seq.gyro[0]), seq.gyro[0], 0.0).mean(0)
-        first = jnp.where(jnp.isfinite(seq.accel[0]), seq.accel[0], 0.0).mean(0)
-        # Cold: the tilt of the block's mean force is the tilt half a block back; move it back
-        # another half block.
-        tilt_mid = accel_tilt(first)
-        tilt0 = tilt_mid - 0.5 * dt * jnp.stack(euler_rates(tilt_mid[0], tilt_mid[1], gyro0))
-        tilt0 = jnp.where(jnp.linalg.norm(first) > 0.5 * GRAVITY, tilt0, 0.0)
-        speed0 = jnp.zeros((), dtype)
-        if warm_start:
-            # Frame 0's truth moved back through the block's mean rates; the speed is the forward
-            # difference (its value half a frame on) moved back by one and a half frames of
-            # acceleration.
-            truth0 = seq.pitch_roll[0]
-            tilt0 = truth0 - dt * jnp.stack(euler_rates(truth0[0], truth0[1], gyro0))
-            accel_x = jnp.where(jnp.isfinite(seq.accel[0, :, 0]), seq.accel[0, :, 0], 0.0).mean()
-            speed_dot = accel_x + GRAVITY * jnp.sin(truth0[0])
-            speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / dt - 1.5 * dt * speed_dot
-        mean = jnp.concatenate([tilt0, jnp.zeros(3, dtype), speed0[None]]).astype(dtype)
-        # Cold: the first tilt is ~1.7 deg uncertain; warm: pitch and roll are known (0.1 deg).
-        tilt_std = 0.002 if warm_start else 0.03
-        cov = jnp.diag(jnp.asarray([tilt_std**2] * 2 + [0.005**2] * 3 + [0.1**2], dtype))
-        carry = BevoCarry(ukf.GaussianState(mean, cov), jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype))
-        frames = (seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
+        attitude = self.initial_attitude(seq, warm_start).astype(dtype)
+        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype))
+        frames = Frame(seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         return carry, frames, seq
 
-    def frame_dt(self, seq: Sequence) -> float:
-        """Seconds between frames: the IMU interval times the samples per frame."""
-        return self.attitude.dt * seq.gyro.shape[-2]
+    def initial_attitude(self, seq: Sequence, warm_start: bool = False) -> AttitudeState:
+        """The attitude belief before frame 0's IMU block (the first step integrates that block
+        to reach frame 0). Cold: the tilt of the block's mean specific force, moved back half a
+        block through the mean gyro (that tilt is the one half a block back), the speed zero
+        (right when a drive starts at rest), pitch and roll ~1.7 deg uncertain. Warm: the
+        truth's pitch and roll moved back through the block, the speed from the first two true
+        positions moved back by one and a half frames of acceleration, 0.1 deg uncertain."""
+        dt = self.frame_dt(seq)
+        gyro0, _, _ = valid_mean(seq.gyro[0])
+        force0, _, _ = valid_mean(seq.accel[0])
+        if warm_start:
+            truth0 = seq.pitch_roll[0]
+            tilt0 = truth0 - dt * jnp.stack(euler_rates(truth0[0], truth0[1], gyro0))
+            speed_dot = force0[0] + GRAVITY * jnp.sin(truth0[0])
+            speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / dt - 1.5 * dt * speed_dot
+            return AttitudeState.initial(tilt0, speed0, 0.002, 0.005, 0.1)
+        tilt_mid = accel_tilt(force0)
+        tilt0 = tilt_mid - 0.5 * dt * jnp.stack(euler_rates(tilt_mid[0], tilt_mid[1], gyro0))
+        tilt0 = jnp.where(jnp.linalg.norm(force0) > 0.5 * GRAVITY, tilt0, 0.0)
+        return AttitudeState.initial(tilt0, jnp.zeros((), tilt0.dtype), 0.03, 0.005, 0.1)
 
-    def step(
-        self, carry: BevoCarry, frame: tuple, camera: Camera, frame_dt: float, reproject: bool = True
-    ) -> tuple[BevoCarry, tuple]:
-        """One frame of the recursion (module docstring): ``frame`` is one slice of the inputs
-        :meth:`start` returns. Returns the new carry and ``(increment, pitch_roll, confidence,
-        pose)``. With ``bands`` and the filter's attitude, the carried BEV is this frame's image
-        projected again with the updated attitude (the next frame's pitch then differs from it by
-        the gyro only); ``reproject=False`` leaves that to a caller that updates the attitude
-        further (BEVO+)."""
-        state, prev_bev, pose = carry
-        image, gyro, accel, truth, index = frame
-        dtype = prev_bev.dtype
-        predicted = self.attitude.predict(state, gyro, accel)
-        pitch_roll = {
-            "filter": predicted.mean[:2].astype(dtype),
-            "zero": jnp.zeros(2, dtype),
-            "accel": jnp.nan_to_num(tilt_measurements(accel[None])[0]).astype(dtype),
-            "truth": truth,
-        }[self.attitude_source]
-        bev = feathered_bev(image, pitch_roll[0], pitch_roll[1], camera, self.grid, self.feather)
+    # ------------------------------------------------------------------ one frame
+
+    def projection_attitude(self, belief: AttitudeState, frame: Frame) -> Float[Array, " 2"]:
+        """The pitch and roll this frame's BEV is projected with (``attitude_source``)."""
+        dtype = belief.mean.dtype
+        if self.attitude_source == "filter":
+            return belief.pitch_roll
+        if self.attitude_source == "zero":
+            return jnp.zeros(2, dtype)
+        if self.attitude_source == "accel":
+            return jnp.nan_to_num(tilt_measurements(frame.accel[None])[0]).astype(dtype)
+        return frame.true_pitch_roll.astype(dtype)
+
+    def bev(self, image: UInt8[Array, "H W"], pitch_roll: Float[Array, " 2"], camera: Camera) -> Float[Array, "h w"]:
+        """The feathered BEV of an 8-bit image at ``pitch_roll`` (:func:`jbevo.vision.bev.feathered_bev`)."""
+        return feathered_bev(image, pitch_roll[0], pitch_roll[1], camera, self.grid, self.feather)
+
+    def _register(self, prev: Array, bev: Array, belief: AttitudeState, frame: Frame, pitch_roll: Array) -> Registration:
         if self.gyro_window > 0:
-            bias = predicted.mean[2:5].astype(dtype)
-            turn = gyro_yaw_increment(gyro - bias, pitch_roll[0], pitch_roll[1], self.attitude.dt)
-            reg = register(prev_bev, bev, self.dpc, rotation_prior=-turn, prior_window=self.gyro_window)
-        else:
-            reg = register(prev_bev, bev, self.dpc)
+            turn = gyro_yaw_increment(frame.gyro - belief.gyro_bias, pitch_roll[0], pitch_roll[1], self.attitude.dt)
+            return register(prev, bev, self.dpc, rotation_prior=-turn, prior_window=self.gyro_window)
+        return register(prev, bev, self.dpc)
+
+    def observe(self, carry: BevoCarry, frame: Frame, camera: Camera, frame_dt: float) -> Observation:
+        """One frame's odometry, top to bottom, on one attitude belief: the IMU prediction, the
+        BEV at the predicted attitude, DPC against the previous BEV, then the measurement
+        updates (the bands' pitch and pitch-rate bias, the odometry's speed, the lateral tilt)."""
+        belief = self.attitude.predict(carry.attitude, frame.gyro, frame.accel)
+        pitch_roll = self.projection_attitude(belief, frame)
+        bev = self.bev(frame.image, pitch_roll, camera)
+        reg = self._register(carry.bev, bev, belief, frame, pitch_roll)
+        moving = frame.index > 0
         rotation, translation = reg.rotation, reg.translation
-        moving = index > 0
-        filtered = self.attitude_source == "filter"
         if self.bands is not None:
-            height = jnp.asarray(camera.height, dtype)
-            shifts = self.bands.shifts(prev_bev, bev, reg, self.grid, self.dpc)
-            measured = predicted
-            if filtered:
-                measured = self.bands.update_attitude(predicted, shifts, self.grid, self.dpc, height, frame_dt, moving)
-            drift = (predicted.mean[BIAS_Y] - measured.mean[BIAS_Y]) * frame_dt
-            rotation, translation = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift.astype(dtype))
-            predicted = measured
-        new_inc = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
-        speed = jnp.where(moving, new_inc[0] / frame_dt, jnp.nan)
-        state = self.attitude.update(predicted, gyro, accel, speed)
-        if self.bands is not None and filtered and reproject:
-            bev = feathered_bev(image, state.mean[0].astype(dtype), state.mean[1].astype(dtype), camera, self.grid, self.feather)
-        pose = se2_compose(pose, new_inc)
-        confidence = jnp.where(moving, reg.confidence, 0.0)
+            height = jnp.asarray(camera.height, bev.dtype)
+            shifts = self.bands.shifts(carry.bev, bev, reg, self.grid, self.dpc)
+            measured = belief
+            if self.attitude_source == "filter":
+                slope = self.bands.slope_measurement(shifts, self.grid, self.dpc, height, frame_dt)
+                h = AttitudeState.row(pitch=slope.pitch, pitch_rate_bias=slope.pitch_rate_bias, dtype=belief.mean.dtype)
+                measured = self.attitude.update_linear(belief, h, slope.value, slope.variance, moving & slope.valid)
+            # The previous BEV's pitch relative to this one's, as the update estimates it.
+            drift = ((belief.pitch_rate_bias - measured.pitch_rate_bias) * frame_dt).astype(bev.dtype)
+            rotation, translation = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift)
+            belief = measured
+        increment = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
+        belief = self.attitude.update_speed(belief, jnp.where(moving, increment[0] / frame_dt, jnp.nan))
+        belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
+        return Observation(belief, pitch_roll, bev, increment, jnp.where(moving, reg.confidence, 0.0))
+
+    def advance(
+        self, carry: BevoCarry, observation: Observation, frame: Frame, camera: Camera,
+        attitude: AttitudeState | None = None, reproject: bool | None = None,
+    ) -> BevoCarry:
+        """The carry for the next frame: the final ``attitude`` (default: the observation's),
+        this frame's BEV, projected once more at that attitude when ``reproject`` (default: with
+        bands; BEVO+ re-projects after the map's pitch) and the filter sets the attitude (so the
+        next BEV pair differs by the gyro only), and the pose moved by the increment."""
+        attitude = observation.attitude if attitude is None else attitude
+        reproject = self.bands is not None if reproject is None else reproject
+        bev = observation.bev
+        if reproject and self.attitude_source == "filter":
+            bev = self.bev(frame.image, attitude.pitch_roll.astype(bev.dtype), camera)
+        new = BevoCarry(attitude, bev, se2_compose(carry.pose, observation.increment))
         # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
-        new_carry = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), BevoCarry(state, bev, pose), carry)
-        return new_carry, (new_inc, pitch_roll, confidence, pose)
+        return jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), new, carry)
+
+    def step(self, carry: BevoCarry, frame: Frame, camera: Camera, frame_dt: float) -> tuple[BevoCarry, BevoOutput]:
+        """One frame of the recursion: :meth:`observe`, then :meth:`advance`. Returns the new
+        carry and this frame's row of :class:`BevoOutput`."""
+        observation = self.observe(carry, frame, camera, frame_dt)
+        carry = self.advance(carry, observation, frame, camera)
+        return carry, BevoOutput(observation.increment, observation.pitch_roll, observation.confidence, carry.pose)
 
     def __call__(
         self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False
@@ -219,9 +284,10 @@ class Bevo(eqx.Module):
 
         Cold start (default): pitch and roll start at the tilt of the first accelerometer block
         and the speed at zero, right when a drive starts at rest. ``warm_start`` starts from the
-        ground truth's pitch, roll and speed at frame 0 instead (moved back through frame 0's IMU
-        block, which the first step integrates), as if the filter had run before: a window cut from the middle of a drive (training) may begin in a turn, where the
-        uncompensated tilt is off by the centripetal acceleration (3 m/s^2: 18 degrees).
+        ground truth's pitch, roll and speed at frame 0 instead (:meth:`initial_attitude`), as
+        if the filter had run before: a window cut from the middle of a drive (training) may
+        begin in a turn, where the uncompensated tilt is off by the centripetal acceleration
+        (3 m/s^2: 18 degrees).
         """
         carry0, frames, seq = self.start(seq, initial_pose, warm_start)
         frame_dt = self.frame_dt(seq)
@@ -230,8 +296,8 @@ class Bevo(eqx.Module):
         def step(carry, frame):
             return self.step(carry, frame, seq.camera, frame_dt)
 
-        _, (increments, pitch_roll, confidence, poses) = jax.lax.scan(step, carry0, frames)
-        return BevoOutput(increments, pitch_roll, confidence, poses)
+        _, outputs = jax.lax.scan(step, carry0, frames)
+        return outputs
 
 
-__all__ = ["Bevo", "BevoCarry", "BevoOutput"]
+__all__ = ["ATTITUDE_SOURCES", "Bevo", "BevoCarry", "BevoOutput", "Frame", "Observation"]

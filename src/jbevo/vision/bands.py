@@ -40,23 +40,21 @@ there), so :class:`jbevo.models.bevo.Bevo` leaves them off unless asked.
 
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
-from jbevo.filtering import ukf
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.phase_correlation import disk_window, rotate_image
 from jbevo.vision.registration import Registration, register_translation
 
-PITCH, BIAS_Y = 0, 3  # indices in jbevo.inertial.speed_aided.SPEED_AIDED_STATE
-
-
+@functools.cache
 def band_moments(grid: BevGrid, taper: float, power: int) -> tuple[float, float]:
     """``E[x^power]`` over the far (top) and the near (bottom) half of ``grid`` under DPC's disk
     window, ``x`` the ground distance ahead of a row (numpy, at trace time)."""
@@ -85,6 +83,16 @@ class BandShifts(NamedTuple):
     forward: Float[Array, " 2"]  #: (far, near), positive: the scene moved toward the camera
     lateral: Float[Array, " 2"]  #: (far, near), along the BEV's columns
     confidence: Float[Array, " 2"]
+
+
+class SlopeMeasurement(NamedTuple):
+    """The bands' forward-shift slope as a scalar measurement linear in the attitude state."""
+
+    value: Float[Array, ""]  #: the measured slope (per metre of distance ahead)
+    pitch: Float[Array, ""]  #: its coefficient on the pitch error (per radian)
+    pitch_rate_bias: Float[Array, ""]  #: its coefficient on the pitch-rate bias error (per rad/s)
+    variance: Float[Array, ""]
+    valid: Bool[Array, ""]  #: False where the shifts are not finite (then the other fields are 0)
 
 
 class BandGeometry(eqx.Module):
@@ -123,20 +131,25 @@ class BandGeometry(eqx.Module):
         slope = self._slope(forward, grid, params)
         return (forward[1] - x_near * slope) / (1.0 + 0.5 * slope)
 
-    def update_attitude(
-        self, predicted: ukf.GaussianState, shifts: BandShifts, grid: BevGrid, params: DPCParams,
-        height: Array, frame_dt: float, use: Array,
-    ) -> ukf.GaussianState:
-        """Condition the speed-aided attitude belief (whose mean projected the current BEV) on the
-        forward-shift slope (module docstring); unchanged where ``use`` is False."""
-        mean = predicted.mean
+    def slope_measurement(
+        self, shifts: BandShifts, grid: BevGrid, params: DPCParams, height: Float[Array, ""], frame_dt: float
+    ) -> SlopeMeasurement:
+        """The forward-shift slope of the band pair as a scalar measurement of the attitude the
+        current BEV was projected with (module docstring): ``m = [2 D (p - p_hat) + c T (b_y -
+        b_hat_y)] / h``, whose prediction at that attitude is zero."""
         (x_far, x_near), (m2_far, m2_near) = band_moments(grid, params.window_taper, 1), band_moments(grid, params.window_taper, 2)
         travel = self._extrapolate(shifts.forward, grid, params)
         c = (m2_far - m2_near) / (x_far - x_near) + 2.0 * travel
-        h_row = jnp.zeros_like(mean).at[PITCH].set(2.0 * travel / height).at[BIAS_Y].set(c * frame_dt / height)
-        innovation = self._slope(shifts.forward, grid, params)
-        ok = use & jnp.isfinite(innovation)
-        return ukf.linear_update(predicted, h_row, innovation, jnp.exp(2.0 * self.log_slope_std), ok)
+        slope = self._slope(shifts.forward, grid, params)
+        valid = jnp.isfinite(slope) & jnp.isfinite(travel)
+        zero = jnp.zeros_like(slope)
+        return SlopeMeasurement(
+            value=jnp.where(valid, slope, zero),
+            pitch=jnp.where(valid, 2.0 * travel / height, zero),
+            pitch_rate_bias=jnp.where(valid, c * frame_dt / height, zero),
+            variance=jnp.exp(2.0 * self.log_slope_std).astype(slope.dtype),
+            valid=valid,
+        )
 
     def motion(
         self, shifts: BandShifts, reg: Registration, grid: BevGrid, params: DPCParams, height: Array, drift: Array
@@ -161,4 +174,4 @@ class BandGeometry(eqx.Module):
         return rotation, jnp.stack([lateral, travel]) / grid.resolution
 
 
-__all__ = ["BandGeometry", "BandShifts", "band_moments", "register_bands"]
+__all__ = ["BandGeometry", "BandShifts", "SlopeMeasurement", "band_moments", "register_bands"]
