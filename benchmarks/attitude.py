@@ -48,19 +48,18 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import equinox as eqx   # noqa: E402
-import jax.numpy as jnp   # noqa: E402
-import numpy as np   # noqa: E402
-import optax   # noqa: E402
+import equinox as eqx  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import optax  # noqa: E402
 
-from jbevo.inertial.attitude_filter import AttitudeFilter, integrate_gyro  # noqa: E402
-from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude  # noqa: E402
-from jbevo.inertial.kinematics import tilt_measurements  # noqa: E402
-from jbevo.data.kitti_frames import body_poses_from_kitti   # noqa: E402
-from jbevo.data.synthetic.imu import ADIS16448, planar_body_velocity, simulate_imu   # noqa: E402
-from jbevo.inertial.kinematics import GRAVITY   # noqa: E402
+from jbevo.data import pose_files  # noqa: E402
+from jbevo.data.kitti_frames import body_poses_from_kitti  # noqa: E402
+from jbevo.data.synthetic.imu import ADIS16448, planar_body_velocity, simulate_imu  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
-from jbevo.eval import pose_files as trajectory_io
+from jbevo.inertial.attitude_filter import AttitudeFilter, integrate_gyro  # noqa: E402
+from jbevo.inertial.kinematics import GRAVITY, tilt_measurements  # noqa: E402
+from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude  # noqa: E402
 
 TRAIN = [f"{i:02d}" for i in range(9)]
 TEST = ["09", "10"]
@@ -69,7 +68,7 @@ DT = 0.01
 
 
 def load_sequence(root: Path, name: str, speed_noise: float) -> dict:
-    gt = trajectory_io.read_kitti(root / "kitti_odom" / "gt_poses" / f"{name}.txt").poses
+    gt = pose_files.read_kitti(root / "kitti_odom" / "gt_poses" / f"{name}.txt").poses
     body = body_poses_from_kitti(gt)
     t = 0.1 * np.arange(len(gt))
     d = simulate_imu(t, body, rate_hz=1 / DT, noise=ADIS16448, seed=int(name))
@@ -190,8 +189,10 @@ def main() -> None:
     data = windows(train_seqs, args.window)
     truths = [s["truth"] for s in test_seqs]
     test_jnp = [{k: jnp.asarray(v) for k, v in s.items()} for s in test_seqs]
-    print(f"simulated IMU for {len(TRAIN) + len(TEST)} sequences in {time.time() - t0:.1f} s; "
-          f"{data['gyro'].shape[0]} training windows of {args.window} frames")
+    print(
+        f"simulated IMU for {len(TRAIN) + len(TEST)} sequences in {time.time() - t0:.1f} s; "
+        f"{data['gyro'].shape[0]} training windows of {args.window} frames"
+    )
 
     results = {}
     results["rmse_deg_accel_bias_tilt"] = rmse_deg([s["accel_bias_tilt"] for s in test_seqs], [0.0, 0.0])
@@ -228,8 +229,9 @@ def main() -> None:
 
     print("the speed-aided filter (BEVO's attitude), measuring the stand-in's forward speed")
     sa0 = SpeedAidedAttitude.create(dt=DT)
-    run_sa = eqx.filter_jit(lambda f, s: run_speed_aided(
-        f, *(jnp.asarray(s[k], jnp.float32) for k in ("gyro", "accel", "initial", "velocity"))))
+    run_sa = eqx.filter_jit(
+        lambda f, s: run_speed_aided(f, *(jnp.asarray(s[k], jnp.float32) for k in ("gyro", "accel", "initial", "velocity")))
+    )
     results["rmse_deg_speed_aided_handset"] = rmse_deg([run_sa(sa0, s) for s in test_seqs], truths)
     sa, hist_sa = train_speed_aided(sa0, data, args.steps, args.lr)
     results["rmse_deg_speed_aided"] = rmse_deg([run_sa(sa, s) for s in test_seqs], truths)
@@ -239,8 +241,15 @@ def main() -> None:
     print("diagnostic: Q, R fitted on the test drives themselves")
     fitted = {}
     for name, f0, compensated in (("dukf", handset, False), ("dukf_gyro_bias", db0, False), ("motion_compensated", mc0, True)):
-        f, _ = fit(f0, lambda f, seqs, c=compensated: sum(jnp.sum((run(f, s, c) - s["truth"]) ** 2) for s in seqs)
-                   / sum(len(s["truth"]) for s in seqs), test_jnp, args.steps, args.lr)
+        f, _ = fit(
+            f0,
+            lambda f, seqs, c=compensated: (
+                sum(jnp.sum((run(f, s, c) - s["truth"]) ** 2) for s in seqs) / sum(len(s["truth"]) for s in seqs)
+            ),
+            test_jnp,
+            args.steps,
+            args.lr,
+        )
         fitted[name] = rmse_deg([run_jit(f, s, compensated) for s in test_seqs], truths)
     results["diagnostic_rmse_deg_fitted_on_test"] = fitted
 
@@ -250,8 +259,12 @@ def main() -> None:
         "mc_motion_per_frame": np.degrees(np.exp(np.asarray(mc.motion_noise.log_std))).tolist(),
         "mc_measurement": np.degrees(np.exp(np.asarray(mc.measurement_noise.log_std))).tolist(),
     }
-    results["training_history_deg"] = {"dukf": hist, "dukf_gyro_bias": hist_db, "motion_compensated": hist_mc,
-                                       "speed_aided": hist_sa}
+    results["training_history_deg"] = {
+        "dukf": hist,
+        "dukf_gyro_bias": hist_db,
+        "motion_compensated": hist_mc,
+        "speed_aided": hist_sa,
+    }
     results["improvement_vs_accel_only"] = {
         "dukf_learned": results["rmse_deg_accel_only"] / results["rmse_deg_dukf_learned"],
         "motion_compensated": results["rmse_deg_accel_only"] / results["rmse_deg_motion_compensated"],
@@ -260,9 +273,16 @@ def main() -> None:
     if bev.exists():
         results["bev_per_s"] = json.loads(bev.read_text())["bev_per_s"]
     results["config"] = {
-        "train": TRAIN, "test": TEST, "window": args.window, "steps": args.steps, "lr": args.lr,
-        "speed_noise_m_s": args.speed_noise, "imu": "ADIS16448 + 0.2 deg/s turn-on gyro bias, 100 Hz",
-        "frame_dt_s": 0.1, "smoothing": 0.01, "seconds": time.time() - t0,
+        "train": TRAIN,
+        "test": TEST,
+        "window": args.window,
+        "steps": args.steps,
+        "lr": args.lr,
+        "speed_noise_m_s": args.speed_noise,
+        "imu": "ADIS16448 + 0.2 deg/s turn-on gyro bias, 100 Hz",
+        "frame_dt_s": 0.1,
+        "smoothing": 0.01,
+        "seconds": time.time() - t0,
     }
     write_json_atomic(args.out, results)
     for k, v in results.items():

@@ -22,10 +22,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo.files import write_json_atomic
-from timing import best_seconds
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.geometry.camera import Camera
 from jbevo.vision.bev import bev_project, bev_to_image_homography
+from timing import best_seconds
 
 
 def main() -> None:

@@ -75,23 +75,32 @@ def main() -> None:
     results = {}
     for label, bands in (("with_bands", True), ("without_bands", False)):
         model = Bevo.create(grid, bands=bands)
-        print(f"{label}: {model.num_learnable()} learnable parameters; {args.sequences} sequences x {args.frames} frames of {camera.image_shape}")
+        print(
+            f"{label}: {model.num_learnable()} learnable parameters; {args.sequences} sequences x {args.frames} frames of {camera.image_shape}"
+        )
         results[label] = measure(model, batch, seqs[0], args.repeats)
     rss_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     print(f"process peak RSS {rss_gb:.2f} GB")
     main_result = results["with_bands"]
 
-    write_json_atomic(args.out, {
-        **main_result,
-        "without_bands": results["without_bands"],
-        "process_peak_rss_gb": rss_gb,
-        "window_frames": args.frames,
-        "sequences": args.sequences,
-        "image_shape": list(camera.image_shape),
-        "bev_shape": list(grid.shape),
-        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
-                    "numpy": np.__version__},
-    })
+    write_json_atomic(
+        args.out,
+        {
+            **main_result,
+            "without_bands": results["without_bands"],
+            "process_peak_rss_gb": rss_gb,
+            "window_frames": args.frames,
+            "sequences": args.sequences,
+            "image_shape": list(camera.image_shape),
+            "bev_shape": list(grid.shape),
+            "machine": {
+                "cpu_count": os.cpu_count(),
+                "platform": platform.platform(),
+                "jax": jax.__version__,
+                "numpy": np.__version__,
+            },
+        },
+    )
     print(f"wrote {args.out}")
 
 

@@ -103,8 +103,8 @@ def run_jbevo(sets, batch: int, repeats: int, params: DPCParams) -> dict:
         a32, b32 = jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32)
         fn = reg_t if name == "T" else reg
         est = [fn(a32[i : i + batch], b32[i : i + batch]) for i in range(0, len(a32), batch)]
-        sec = best_seconds(lambda: fn(a32[:batch], b32[:batch]), repeats) / min(batch, len(a32))
-        single = best_seconds(lambda: fn(a32[:1], b32[:1]), repeats)
+        sec = best_seconds(lambda fn=fn, a32=a32, b32=b32: fn(a32[:batch], b32[:batch]), repeats) / min(batch, len(a32))
+        single = best_seconds(lambda fn=fn, a32=a32, b32=b32: fn(a32[:1], b32[:1]), repeats)
         if name == "T":
             terr = shift_error_px(np.concatenate([e[0] for e in est]), sh)
             aerr = None
@@ -190,7 +190,7 @@ def table(results: dict) -> str:
     ]
     for m in ("jbevo", "cv2", "skimage", "imreg_dft"):
 
-        def g(key, fmt):
+        def g(key, fmt, m=m):
             v = results.get(f"{m}_{key}")
             return "-" if v is None else format(v, fmt)
 

@@ -20,13 +20,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jbevo.geometry.camera import Camera
 from jbevo.data.synthetic.conditions import CONDITIONS
 from jbevo.data.synthetic.render import render_batch
 from jbevo.data.synthetic.sequences import _frames, procedural_sequence
 from jbevo.data.synthetic.trajectories import procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.files import write_json_atomic
+from jbevo.geometry.camera import Camera
 from timing import best_seconds
 
 
@@ -50,8 +50,10 @@ def main() -> None:
     seconds_render = best_seconds(lambda: render_only(world, camera, poses), args.repeats)
     seconds = best_seconds(lambda: _frames(world, camera, poses, times, None, keys, day), args.repeats)
     kitti_fps = args.frames / seconds
-    print(f"render KITTI size: {args.frames / seconds_render:.1f} frames/s; with exposure, sensor noise and 8-bit "
-          f"output: {kitti_fps:.1f} frames/s ({1e3 * seconds / args.frames:.2f} ms/frame)")
+    print(
+        f"render KITTI size: {args.frames / seconds_render:.1f} frames/s; with exposure, sensor noise and 8-bit "
+        f"output: {kitti_fps:.1f} frames/s ({1e3 * seconds / args.frames:.2f} ms/frame)"
+    )
 
     procedural_sequence(0, 8, world=world)  # compile for the small camera
     t0 = time.perf_counter()
@@ -60,17 +62,24 @@ def main() -> None:
     seq_seconds = time.perf_counter() - t0
     print(f"procedural sequence of 200 frames (small camera, IMU, trajectory): {seq_seconds:.2f} s")
 
-    write_json_atomic(args.out, {
-        "frames_per_s_kitti_size": kitti_fps,
-        "ms_per_frame_kitti_size": 1e3 * seconds / args.frames,
-        "render_only_frames_per_s_kitti_size": args.frames / seconds_render,
-        "world_build_s": world_seconds,
-        "procedural_sequence_200_frames_small_camera_s": seq_seconds,
-        "frames": args.frames,
-        "image_shape": list(camera.image_shape),
-        "machine": {"cpu_count": os.cpu_count(), "platform": platform.platform(), "jax": jax.__version__,
-                    "numpy": np.__version__},
-    })
+    write_json_atomic(
+        args.out,
+        {
+            "frames_per_s_kitti_size": kitti_fps,
+            "ms_per_frame_kitti_size": 1e3 * seconds / args.frames,
+            "render_only_frames_per_s_kitti_size": args.frames / seconds_render,
+            "world_build_s": world_seconds,
+            "procedural_sequence_200_frames_small_camera_s": seq_seconds,
+            "frames": args.frames,
+            "image_shape": list(camera.image_shape),
+            "machine": {
+                "cpu_count": os.cpu_count(),
+                "platform": platform.platform(),
+                "jax": jax.__version__,
+                "numpy": np.__version__,
+            },
+        },
+    )
     print(f"wrote {args.out}")
 
 

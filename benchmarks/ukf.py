@@ -47,8 +47,14 @@ def make_jbevo(check_inputs: bool):
 
     def run(x0, increments, fixes):
         res = ukf.filter(
-            model, ukf.GaussianState(x0, jnp.asarray(P0)), increments, fixes, jnp.asarray(Q), jnp.asarray(R),
-            scheme=scheme, check_inputs=check_inputs,
+            model,
+            ukf.GaussianState(x0, jnp.asarray(P0)),
+            increments,
+            fixes,
+            jnp.asarray(Q),
+            jnp.asarray(R),
+            scheme=scheme,
+            check_inputs=check_inputs,
         )
         return res.filtered_mean, res.filtered_cov
 
@@ -82,8 +88,19 @@ def run_filterpy(x0, increments, fixes):
         return np.asarray(se2_compose_np(x, u))
 
     points = MerweScaledSigmaPoints(3, ALPHA, BETA, KAPPA, subtract=residual)
-    f = UnscentedKalmanFilter(3, 3, 1.0, lambda x: x, fx, points, x_mean_fn=mean, z_mean_fn=mean,
-                              residual_x=residual, residual_z=residual, state_add=add)
+    f = UnscentedKalmanFilter(
+        3,
+        3,
+        1.0,
+        lambda x: x,
+        fx,
+        points,
+        x_mean_fn=mean,
+        z_mean_fn=mean,
+        residual_x=residual,
+        residual_z=residual,
+        state_add=add,
+    )
     f.x, f.P, f.Q, f.R = np.array(x0, float), P0.copy(), Q.copy(), R.copy()
     means = np.empty((len(fixes), 3))
     for t in range(len(fixes)):
@@ -95,8 +112,7 @@ def run_filterpy(x0, increments, fixes):
 
 def se2_compose_np(x, u):
     c, s = np.cos(x[2]), np.sin(x[2])
-    return np.array([x[0] + c * u[0] - s * u[1], x[1] + s * u[0] + c * u[1],
-                     (x[2] + u[2] + np.pi) % (2 * np.pi) - np.pi])
+    return np.array([x[0] + c * u[0] - s * u[1], x[1] + s * u[0] + c * u[1], (x[2] + u[2] + np.pi) % (2 * np.pi) - np.pi])
 
 
 def main(argv=None) -> dict:
@@ -134,16 +150,22 @@ def main(argv=None) -> dict:
     results: dict = {"T": steps, "batch": batch, "dtype": "float64", "alpha": ALPHA, "beta": BETA, "kappa": KAPPA}
     # dynamax given jbevo's sincos: how much of the lead is the vectorisable trig.
     dyn_sc = jax.jit(jax.vmap(make_dynamax_runner(trig=sincos)))
-    single = best_seconds_interleaved({
-        "jbevo_single": lambda: jb_single(x0[0], one.increments, one.fixes),
-        "jbevo_single_checked": lambda: jb_checked(x0[0], one.increments, one.fixes),
-        "dynamax_single": lambda: dyn_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]),
-    }, args.repeats)
-    batched = best_seconds_interleaved({
-        "jbevo_vmap64": lambda: jb_batch(x0, seqs.increments, seqs.fixes),
-        "dynamax_vmap64": lambda: dyn_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
-        "dynamax_vmap64_sincos": lambda: dyn_sc(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
-    }, args.repeats)
+    single = best_seconds_interleaved(
+        {
+            "jbevo_single": lambda: jb_single(x0[0], one.increments, one.fixes),
+            "jbevo_single_checked": lambda: jb_checked(x0[0], one.increments, one.fixes),
+            "dynamax_single": lambda: dyn_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]),
+        },
+        args.repeats,
+    )
+    batched = best_seconds_interleaved(
+        {
+            "jbevo_vmap64": lambda: jb_batch(x0, seqs.increments, seqs.fixes),
+            "dynamax_vmap64": lambda: dyn_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
+            "dynamax_vmap64_sincos": lambda: dyn_sc(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
+        },
+        args.repeats,
+    )
     results.update({name: steps / t for name, t in single.items()})
     results.update({name: batch * steps / t for name, t in batched.items()})
 
@@ -183,12 +205,16 @@ def make_dynamax_runner(trig=lambda a: (jnp.sin(a), jnp.cos(a))):
 
     def run(mean0, cov0, inputs, fixes):
         params = ParamsNLGSSM(
-            initial_mean=mean0, initial_covariance=cov0, dynamics_function=motion,
-            dynamics_covariance=jnp.asarray(Q), emission_function=lambda x, u: x,
+            initial_mean=mean0,
+            initial_covariance=cov0,
+            dynamics_function=motion,
+            dynamics_covariance=jnp.asarray(Q),
+            emission_function=lambda x, u: x,
             emission_covariance=jnp.asarray(R),
         )
-        post = unscented_kalman_filter(params, fixes, hyper, inputs=inputs,
-                                       output_fields=["filtered_means", "filtered_covariances"])
+        post = unscented_kalman_filter(
+            params, fixes, hyper, inputs=inputs, output_fields=["filtered_means", "filtered_covariances"]
+        )
         return post.filtered_means, post.filtered_covariances
 
     return run
@@ -201,12 +227,16 @@ def print_table(r: dict) -> None:
     print(f"{'dynamax':<10} {r['dynamax_single']:>18,.0f} {r['dynamax_vmap64']:>22,.0f}")
     print(f"{'dynamax*':<10} {'-':>18} {r['dynamax_vmap64_sincos']:>22,.0f}")
     print(f"{'filterpy':<10} {r['filterpy_single']:>18,.0f} {'-':>22}")
-    print(f"jbevo/dynamax: single {r['speedup_single_vs_dynamax']:.2f}x, vmap {r['speedup_vmap64_vs_dynamax']:.2f}x; "
-          f"jbevo/filterpy {r['speedup_single_vs_filterpy']:.0f}x; jbevo with input checks "
-          f"{r['jbevo_single_checked']:,.0f} steps/s; vmap vs dynamax with jbevo's sincos "
-          f"{r['speedup_vmap64_vs_dynamax_sincos']:.2f}x (dynamax* = dynamax given jbevo's sincos)")
-    print(f"max |jbevo - filterpy| = {r['max_abs_diff_vs_filterpy']:.2e}, "
-          f"max |jbevo - dynamax| = {r['max_abs_diff_vs_dynamax']:.2e}")
+    print(
+        f"jbevo/dynamax: single {r['speedup_single_vs_dynamax']:.2f}x, vmap {r['speedup_vmap64_vs_dynamax']:.2f}x; "
+        f"jbevo/filterpy {r['speedup_single_vs_filterpy']:.0f}x; jbevo with input checks "
+        f"{r['jbevo_single_checked']:,.0f} steps/s; vmap vs dynamax with jbevo's sincos "
+        f"{r['speedup_vmap64_vs_dynamax_sincos']:.2f}x (dynamax* = dynamax given jbevo's sincos)"
+    )
+    print(
+        f"max |jbevo - filterpy| = {r['max_abs_diff_vs_filterpy']:.2e}, "
+        f"max |jbevo - dynamax| = {r['max_abs_diff_vs_dynamax']:.2e}"
+    )
 
 
 if __name__ == "__main__":

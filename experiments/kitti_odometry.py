@@ -56,7 +56,9 @@ def main() -> int:
     p.add_argument("--camera", choices=("small", "kitti"), default="kitti", help="synthetic camera: 128x416 or KITTI's 376x1241")
     p.add_argument("--grid", type=float, nargs=3, default=(0.1, 256, 4.0), metavar=("RES", "SIZE", "NEAR"), help="BEV")
     p.add_argument("--window", type=int, default=96, help="training window (frames); long enough for the bias to matter")
-    p.add_argument("--val-window", type=int, default=0, help="validation windows of 08 (0: the whole capped drive from a cold start)")
+    p.add_argument(
+        "--val-window", type=int, default=0, help="validation windows of 08 (0: the whole capped drive from a cold start)"
+    )
     p.add_argument("--no-bands", action="store_true", help="train BEVO without the band geometry (jbevo.bands)")
     p.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     args = p.parse_args()
@@ -67,12 +69,38 @@ def main() -> int:
     run_dir = args.out / "kitti_odometry_run"
     t0 = time.perf_counter()
     res, size, near = args.grid
-    common = ["--dataset", dataset, "--frames", str(args.frames), "--out", str(run_dir), "--camera", args.camera,
-              "--grid", str(res), str(int(size)), str(near)]
+    common = [
+        "--dataset",
+        dataset,
+        "--frames",
+        str(args.frames),
+        "--out",
+        str(run_dir),
+        "--camera",
+        args.camera,
+        "--grid",
+        str(res),
+        str(int(size)),
+        str(near),
+    ]
     common += ["--kitti-root", str(args.kitti_root)] if args.kitti_root else ["--kitti-poses", str(poses)]
     bands = [] if args.no_bands else ["--bands"]
-    train.main([*common, *bands, "--train", *[f"{i:02d}" for i in range(8)], "--val", "08", "--epochs", str(args.epochs),
-                "--window", str(args.window), "--val-window", str(args.val_window)])
+    train.main(
+        [
+            *common,
+            *bands,
+            "--train",
+            *[f"{i:02d}" for i in range(8)],
+            "--val",
+            "08",
+            "--epochs",
+            str(args.epochs),
+            "--window",
+            str(args.window),
+            "--val-window",
+            str(args.val_window),
+        ]
+    )
     train_seconds = time.perf_counter() - t0
 
     test_names = ["09", "10"]
@@ -94,11 +122,17 @@ def main() -> int:
         rows[label]["frames_per_s"] = fps
         print(label, rows[label])
     for i, name in enumerate(test_names):
-        trajectory_top_view(args.out / f"kitti_odometry_{name}.png", np.asarray(seqs[i].planar),
-                            {k: np.asarray(v[i].poses) for k, v in outputs.items()}, title=f"sequence {name} ({dataset})")
-    lines = ["| variant | 09 t_err % | 09 r_err deg/100m | 09 ATE m | 10 t_err % | 10 r_err deg/100m | 10 ATE m "
-             "| 09+10 t_err % | 09+10 r_err deg/100m |",
-             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+        trajectory_top_view(
+            args.out / f"kitti_odometry_{name}.png",
+            np.asarray(seqs[i].planar),
+            {k: np.asarray(v[i].poses) for k, v in outputs.items()},
+            title=f"sequence {name} ({dataset})",
+        )
+    lines = [
+        "| variant | 09 t_err % | 09 r_err deg/100m | 09 ATE m | 10 t_err % | 10 r_err deg/100m | 10 ATE m "
+        "| 09+10 t_err % | 09+10 r_err deg/100m |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
     for label, r in rows.items():
         cells = [f"{r[n][k]:.2f}" for n in test_names for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m")]
         cells += [f"{r['pooled'][k]:.2f}" for k in ("t_err_pct", "r_err_deg_per_100m")]
@@ -106,13 +140,24 @@ def main() -> int:
     table = "\n".join(lines) + "\n"
     print(table)
     write_text_atomic(args.out / "kitti_odometry.md", table)
-    write_json_atomic(args.out / "kitti_odometry.json", {
-        "dataset": dataset, "train": [f"{i:02d}" for i in range(8)], "checkpoint_selection": "08",
-        "test": test_names, "training_frames_per_sequence": args.frames, "epochs": args.epochs,
-        "window": args.window, "val_window": args.val_window,
-        "training_seconds": train_seconds, "results": rows, "bev": {"resolution": res, "shape": [int(size)] * 2, "near": near},
-        "camera": args.camera if dataset == "kitti-synthetic" else "KITTI", "bands": not args.no_bands,
-    })
+    write_json_atomic(
+        args.out / "kitti_odometry.json",
+        {
+            "dataset": dataset,
+            "train": [f"{i:02d}" for i in range(8)],
+            "checkpoint_selection": "08",
+            "test": test_names,
+            "training_frames_per_sequence": args.frames,
+            "epochs": args.epochs,
+            "window": args.window,
+            "val_window": args.val_window,
+            "training_seconds": train_seconds,
+            "results": rows,
+            "bev": {"resolution": res, "shape": [int(size)] * 2, "near": near},
+            "camera": args.camera if dataset == "kitti-synthetic" else "KITTI",
+            "bands": not args.no_bands,
+        },
+    )
     return 0
 
 

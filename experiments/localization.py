@@ -31,8 +31,12 @@ METHODS = ("BEVO+", "BEVO odometry", "map matching alone")
 def run_kind(kind: str, epochs: int, out: Path) -> dict:
     run = out / f"localization_{kind}_run"
     localize.main(["train", "--kind", kind, "--epochs", str(epochs), "--out", str(run)])
-    learned = localize.evaluate(localize.build_parser().parse_args(["evaluate", "--kind", kind, "--checkpoint", str(run), "--out", str(run / "eval")]))
-    hand = localize.evaluate(localize.build_parser().parse_args(["evaluate", "--kind", kind, "--out", str(run / "eval_hand_set")]))
+    learned = localize.evaluate(
+        localize.build_parser().parse_args(["evaluate", "--kind", kind, "--checkpoint", str(run), "--out", str(run / "eval")])
+    )
+    hand = localize.evaluate(
+        localize.build_parser().parse_args(["evaluate", "--kind", kind, "--out", str(run / "eval_hand_set")])
+    )
     rows = {}
     for name, entry in learned["scenes"].items():
         condition = name.split("_")[2]
@@ -48,15 +52,19 @@ def run_kind(kind: str, epochs: int, out: Path) -> dict:
 
 
 def table(results: dict) -> str:
-    lines = ["| scene | condition | method | mean pos. err (m) | max pos. err (m) | mean yaw err (deg) | final pos. err (m) | distance (m) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "| scene | condition | method | mean pos. err (m) | max pos. err (m) | mean yaw err (deg) | final pos. err (m) | distance (m) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for kind, res in results.items():
         for condition, rows in res["conditions"].items():
             for method, m in rows.items():
                 if not isinstance(m, dict):
                     continue
-                lines.append(f"| {kind} | {condition} | {method} | {m['mean_position_error_m']:.3f} | {m['max_position_error_m']:.3f} | "
-                             f"{m['mean_yaw_error_deg']:.3f} | {m['final_position_error_m']:.3f} | {m['distance_m']:.0f} |")
+                lines.append(
+                    f"| {kind} | {condition} | {method} | {m['mean_position_error_m']:.3f} | {m['max_position_error_m']:.3f} | "
+                    f"{m['mean_yaw_error_deg']:.3f} | {m['final_position_error_m']:.3f} | {m['distance_m']:.0f} |"
+                )
     return "\n".join(lines) + "\n"
 
 

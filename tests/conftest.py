@@ -1,15 +1,45 @@
-"""Shared test set-up: float64 available everywhere, reference data from $JBEVO_REFERENCE_DATA,
-and JAX's compilation caches cleared after each test module."""
+"""Shared test set-up.
+
+* jbevo's jaxtyping annotations are checked at run time (shapes and dtypes of every annotated
+  argument and return value, with beartype), for every module the tests import.
+* The suite runs in float32, the default users get; tests that need float64 (exactness against
+  an independent reference, finite-difference gradient checks) ask for the ``float64`` fixture.
+* Reference data comes from ``$JBEVO_REFERENCE_DATA``; tests that need it skip without it.
+* JAX's compilation caches are cleared after each test module.
+"""
 
 import gc
 import os
 from pathlib import Path
 
-import jax
-import pytest
+from jaxtyping import install_import_hook
 
-# Exactness tests need float64; float32 tests ask for float32 arrays explicitly.
-jax.config.update("jax_enable_x64", True)
+import tests.typecheck  # noqa: F401  (the hook looks the checker up by its dotted name)
+
+# Before any jbevo module is imported: every one imported from here on is checked.
+_HOOK = install_import_hook("jbevo", "tests.typecheck.checker")
+
+import jax  # noqa: E402
+import jaxtyping  # noqa: E402
+import pytest  # noqa: E402
+
+
+@pytest.fixture
+def float64():
+    """Run the test with ``jax_enable_x64``: float64 by default."""
+    with jax.enable_x64(True):
+        yield
+
+
+@pytest.fixture
+def as_users_run():
+    """Turn the run-time shape checks off, as they are for users: for tests of the errors that
+    jbevo's own input checks raise (a shape check would catch the bad input first)."""
+    jaxtyping.config.update("jaxtyping_disable", True)
+    try:
+        yield
+    finally:
+        jaxtyping.config.update("jaxtyping_disable", False)
 
 
 @pytest.fixture

@@ -27,6 +27,8 @@ def check_leaf_gradients(value, grads, params, abs_tol: float, rel_tol: float = 
 
             fd = (shifted(eps) - shifted(-eps)) / (2 * eps)
             analytic = float(g.reshape(-1)[j])
-            assert abs(fd - analytic) <= rel_tol * max(abs(fd), abs(analytic)) + abs_tol, f"leaf {i}[{j}]: finite difference {fd}, grad {analytic}"
+            assert abs(fd - analytic) <= rel_tol * max(abs(fd), abs(analytic)) + abs_tol, (
+                f"leaf {i}[{j}]: finite difference {fd}, grad {analytic}"
+            )
             checked += 1
     return checked

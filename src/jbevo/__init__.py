@@ -19,13 +19,43 @@ from jbevo import data, eval, filtering, geometry, inertial, models, training, v
 from jbevo.data import Map, Sequence
 from jbevo.filtering import ukf, unscented
 from jbevo.geometry import BevGrid, Camera
-from jbevo.models import Bevo, BevoOutput, BevoPlus, LocalizationOutput, run_bevo, run_bevo_batch, run_bevo_plus, run_bevo_plus_batch
+from jbevo.models import (
+    Bevo,
+    BevoOutput,
+    BevoPlus,
+    LocalizationOutput,
+    run_bevo,
+    run_bevo_batch,
+    run_bevo_plus,
+    run_bevo_plus_batch,
+)
 from jbevo.vision import DPCParams, register
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "BevGrid", "Bevo", "BevoOutput", "BevoPlus", "Camera", "DPCParams", "LocalizationOutput", "Map", "Sequence", "data", "eval",
-    "filtering", "geometry", "inertial", "models", "register", "run_bevo", "run_bevo_batch", "run_bevo_plus",
-    "run_bevo_plus_batch", "training", "ukf", "unscented", "vision",
+    "BevGrid",
+    "Bevo",
+    "BevoOutput",
+    "BevoPlus",
+    "Camera",
+    "DPCParams",
+    "LocalizationOutput",
+    "Map",
+    "Sequence",
+    "data",
+    "eval",
+    "filtering",
+    "geometry",
+    "inertial",
+    "models",
+    "register",
+    "run_bevo",
+    "run_bevo_batch",
+    "run_bevo_plus",
+    "run_bevo_plus_batch",
+    "training",
+    "ukf",
+    "unscented",
+    "vision",
 ]

@@ -2,7 +2,6 @@
 
 import json
 
-
 from jbevo.cli.localize import main
 from jbevo.training import checkpoint
 

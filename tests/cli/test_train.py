@@ -8,11 +8,25 @@ import subprocess
 import sys
 
 import pytest
-from jbevo.cli import evaluate
-from jbevo.cli import train
 
+from jbevo.cli import evaluate, train
 
-TINY = ["--sequences", "2", "--frames", "24", "--window", "12", "--val-window", "12", "--batch", "2", "--grid", "0.1", "64", "7.5"]
+TINY = [
+    "--sequences",
+    "2",
+    "--frames",
+    "24",
+    "--window",
+    "12",
+    "--val-window",
+    "12",
+    "--batch",
+    "2",
+    "--grid",
+    "0.1",
+    "64",
+    "7.5",
+]
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +73,21 @@ def test_evaluate_writes_poses_plots_and_metrics(run_dir, tmp_path):
 def test_evaluate_shards_over_four_cpu_devices(tmp_path):
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu")
     out = tmp_path / "sharded"
-    cmd = [sys.executable, "-m", "jbevo.evaluate", "--sequences", "3", "--frames", "8", "--grid", "0.1", "64", "7.5", "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "jbevo.evaluate",
+        "--sequences",
+        "3",
+        "--frames",
+        "8",
+        "--grid",
+        "0.1",
+        "64",
+        "7.5",
+        "--out",
+        str(out),
+    ]
     result = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     metrics = json.loads((out / "metrics.json").read_text())

@@ -7,13 +7,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jbevo.eval import pose_files as trajectory_io
+
 from jbevo.cli.metrics import main
+from jbevo.data import pose_files
+from jbevo.data.pose_files import write_kitti
 from jbevo.eval.alignment import align
 from jbevo.eval.devkit import SEGMENT_LENGTHS, kitti_errors, kitti_segment_errors
 from jbevo.eval.trajectory_metrics import evaluate, evaluate_batch, rpe
 from jbevo.geometry.se3 import planar_to_se3, se3_to_planar
 
+# Exactness against independent references needs float64 (conftest's fixture).
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def straight_then_turning(n: int = 1200, speed: float = 1.0, yaw_rate: float = 0.0) -> np.ndarray:
@@ -21,7 +25,7 @@ def straight_then_turning(n: int = 1200, speed: float = 1.0, yaw_rate: float = 0
     yaw = yaw_rate * np.arange(n)
     step = np.stack([np.cos(yaw), np.sin(yaw)], 1) * speed
     xy = np.concatenate([[[0.0, 0.0]], np.cumsum(step[:-1], 0)])
-    return trajectory_io.planar_to_poses(np.concatenate([xy, yaw[:, None]], 1))
+    return pose_files.planar_to_poses(np.concatenate([xy, yaw[:, None]], 1))
 
 
 def test_perfect_estimate_has_zero_error():
@@ -115,7 +119,7 @@ def test_planar_trajectories_and_the_batched_path():
     gts, ests = [], []
     for k in range(3):
         gt = straight_then_turning(n=400, yaw_rate=0.002 * (k + 1))
-        planar = trajectory_io.to_planar(gt) + rng.normal(0, 0.01, (400, 3)).cumsum(0) * [1, 1, 0.01]
+        planar = pose_files.to_planar(gt) + rng.normal(0, 0.01, (400, 3)).cumsum(0) * [1, 1, 0.01]
         gts.append(gt)
         ests.append(np.asarray(planar_to_se3(jnp.asarray(planar))))
     batch, ates = jax.jit(evaluate_batch, static_argnames=("alignment", "up_axis"))(
@@ -136,9 +140,9 @@ def test_planar_trajectories_and_the_batched_path():
 
 
 def load_matched(reference_data, gt_name, est_path):
-    gt = trajectory_io.read_poses(reference_data / "kitti_odom" / "gt_poses" / gt_name)
-    est = trajectory_io.read_poses(est_path)
-    return [jnp.asarray(x) for x in trajectory_io.match_frames(gt, est)]
+    gt = pose_files.read_poses(reference_data / "kitti_odom" / "gt_poses" / gt_name)
+    est = pose_files.read_poses(est_path)
+    return [jnp.asarray(x) for x in pose_files.match_frames(gt, est)]
 
 
 def test_reference_vo_example_09_sim3(reference_data):
@@ -165,11 +169,20 @@ def test_reference_orbslam2_00_no_alignment(reference_data):
 def test_command_line_writes_json_and_plot(reference_data, tmp_path, capsys):
     out = tmp_path / "m.json"
     png = tmp_path / "m.png"
-    code = main([
-        "--gt", str(reference_data / "kitti_odom" / "gt_poses" / "09.txt"),
-        "--est", str(reference_data / "kitti_odom" / "vo_example" / "09.txt"),
-        "--align", "sim3", "--json", str(out), "--plot", str(png),
-    ])
+    code = main(
+        [
+            "--gt",
+            str(reference_data / "kitti_odom" / "gt_poses" / "09.txt"),
+            "--est",
+            str(reference_data / "kitti_odom" / "vo_example" / "09.txt"),
+            "--align",
+            "sim3",
+            "--json",
+            str(out),
+            "--plot",
+            str(png),
+        ]
+    )
     assert code == 0
     data = json.loads(out.read_text())
     for key in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "rpe_trans_m", "rpe_rot_deg"):
@@ -182,3 +195,19 @@ def test_command_line_writes_json_and_plot(reference_data, tmp_path, capsys):
 def test_command_line_names_a_missing_file(tmp_path, capsys):
     assert main(["--gt", str(tmp_path / "none.txt"), "--est", str(tmp_path / "none.txt")]) == 1
     assert "not found" in capsys.readouterr().err
+
+
+def test_a_drive_shorter_than_any_segment_has_no_t_err(tmp_path, capsys):
+    """50 m hold no 100 m segment: the command says so and writes null, not a zero."""
+    n = 51
+    planar = np.stack([np.arange(n) * 1.0, np.zeros(n), np.zeros(n)], -1)
+    write_kitti(tmp_path / "gt.txt", planar)
+    write_kitti(tmp_path / "est.txt", planar * [1.01, 1.0, 1.0])
+    out = tmp_path / "m.json"
+    assert main(["--gt", str(tmp_path / "gt.txt"), "--est", str(tmp_path / "est.txt"), "--up-axis", "2", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "no segment of 100 m or more" in text and "0.000000 %" not in text
+    numbers = json.loads(out.read_text())
+    assert numbers["segments"] == 0 and numbers["t_err_pct"] is None and numbers["r_err_deg_per_100m"] is None
+    assert all(v is None for v in numbers["t_err_pct_by_length"].values())
+    assert numbers["ate_m"] > 0

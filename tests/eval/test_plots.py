@@ -1,9 +1,9 @@
 """Figures are written as valid PNGs, atomically, from poses and planar trajectories."""
 
 import numpy as np
-from jbevo.eval import plots
-from jbevo.eval import pose_files as trajectory_io
 
+from jbevo.data import pose_files
+from jbevo.eval import plots
 
 
 def is_png(path):
@@ -13,7 +13,7 @@ def is_png(path):
 def test_figures_are_written(tmp_path):
     t = np.linspace(0, 2 * np.pi, 100)
     planar = np.stack([np.cos(t) * 50, np.sin(t) * 50, t], 1)
-    poses = trajectory_io.planar_to_poses(planar + 1.0)
+    poses = pose_files.planar_to_poses(planar + 1.0)
     plots.trajectory_top_view(tmp_path / "top.png", planar, {"a": poses, "b": planar * 1.02}, plane=(0, 1))
     plots.segment_errors(tmp_path / "seg.png", [100, 200, 300], {"a": [1.0, 0.9, 0.8]}, {"a": [0.3, 0.2, 0.2]})
     plots.error_over_time(tmp_path / "time.png", t, {"position [m]": np.abs(np.sin(t))})

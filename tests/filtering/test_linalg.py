@@ -2,8 +2,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+
 from jbevo.filtering import linalg
 
+# Exactness against independent references needs float64 (conftest's fixture).
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def random_spd(rng, n, batch=()):

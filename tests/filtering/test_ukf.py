@@ -7,10 +7,13 @@ import pytest
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from jbevo.data.synthetic.planar import simulate_planar_sequence
-from jbevo.geometry.angles import wrap_angle
+from jbevo.filtering import ukf
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.unscented import MerweScaled
-from jbevo.filtering import ukf
+from jbevo.geometry.angles import wrap_angle
+
+# Exactness against independent references needs float64 (conftest's fixture).
+pytestmark = pytest.mark.usefixtures("float64")
 
 Q = np.diag([0.02, 0.01, 0.005]) ** 2
 R = np.diag([0.5, 0.5, 0.05]) ** 2
@@ -45,8 +48,19 @@ def filterpy_localization(x0, increments, fixes, alpha, beta, kappa):
         return np.array([x[0] + c * u[0] - s * u[1], x[1] + s * u[0] + c * u[1], wrap_np(x[2] + u[2])])
 
     points = MerweScaledSigmaPoints(3, alpha, beta, kappa, subtract=residual)
-    f = UnscentedKalmanFilter(3, 3, 1.0, lambda x: x, fx, points, x_mean_fn=mean, z_mean_fn=mean,
-                              residual_x=residual, residual_z=residual, state_add=add)
+    f = UnscentedKalmanFilter(
+        3,
+        3,
+        1.0,
+        lambda x: x,
+        fx,
+        points,
+        x_mean_fn=mean,
+        z_mean_fn=mean,
+        residual_x=residual,
+        residual_z=residual,
+        state_add=add,
+    )
     f.x, f.P, f.Q, f.R = np.array(x0, float), P0.copy(), Q.copy(), R.copy()
     out = {"mean": [], "cov": [], "pred_mean": [], "pred_cov": [], "ll": []}
     for u, z in zip(increments, fixes):
@@ -61,8 +75,16 @@ def filterpy_localization(x0, increments, fixes, alpha, beta, kappa):
 
 
 def run_localization(x0, seq, *, scheme=MerweScaled(), q=Q, r=R, **kw):
-    return ukf.filter(planar_pose_model(), ukf.GaussianState(jnp.asarray(x0), jnp.asarray(P0)),
-                      seq.increments, seq.fixes, jnp.asarray(q), jnp.asarray(r), scheme=scheme, **kw)
+    return ukf.filter(
+        planar_pose_model(),
+        ukf.GaussianState(jnp.asarray(x0), jnp.asarray(P0)),
+        seq.increments,
+        seq.fixes,
+        jnp.asarray(q),
+        jnp.asarray(r),
+        scheme=scheme,
+        **kw,
+    )
 
 
 @pytest.mark.parametrize("alpha,beta,kappa", [(1.0, 2.0, 0.0), (0.5, 2.0, 1.0)])
@@ -106,10 +128,18 @@ def test_equals_linear_kalman_filter_on_linear_model(scheme):
     Qm, Rm = np.diag(rng.uniform(0.01, 0.1, n)), np.diag(rng.uniform(0.1, 1.0, m))
     us, zs = rng.normal(size=(T, 2)), rng.normal(size=(T, m))
     m0, P0m = rng.normal(size=n), np.eye(n)
-    model = ukf.StateSpaceModel(motion=lambda x, u: jnp.asarray(A) @ x + jnp.asarray(B) @ u,
-                                measurement=lambda x: jnp.asarray(H) @ x)
-    res = ukf.filter(model, ukf.GaussianState(jnp.asarray(m0), jnp.asarray(P0m)), jnp.asarray(us), jnp.asarray(zs),
-                     jnp.asarray(Qm), jnp.asarray(Rm), scheme=scheme)
+    model = ukf.StateSpaceModel(
+        motion=lambda x, u: jnp.asarray(A) @ x + jnp.asarray(B) @ u, measurement=lambda x: jnp.asarray(H) @ x
+    )
+    res = ukf.filter(
+        model,
+        ukf.GaussianState(jnp.asarray(m0), jnp.asarray(P0m)),
+        jnp.asarray(us),
+        jnp.asarray(zs),
+        jnp.asarray(Qm),
+        jnp.asarray(Rm),
+        scheme=scheme,
+    )
     ref_means, ref_covs, ref_ll = kalman_filter_reference(A, B, H, Qm, Rm, m0, P0m, us, zs)
     np.testing.assert_allclose(res.filtered_mean, ref_means, atol=1e-9)
     np.testing.assert_allclose(res.filtered_cov, ref_covs, atol=1e-9)
@@ -149,10 +179,15 @@ def test_all_missing_measurement_is_a_predict_only_step():
 
 def test_partial_measurement_equals_update_with_observed_entries_only():
     full = planar_pose_model()
-    yaw_only = ukf.StateSpaceModel(motion=full.motion, measurement=lambda x: x[2:], state_residual=full.state_residual,
-                                   state_add=full.state_add, state_mean=full.state_mean,
-                                   measurement_residual=lambda a, b: wrap_angle(a - b),
-                                   measurement_mean=lambda p, w: full.measurement_mean(jnp.pad(p, ((0, 0), (2, 0))), w)[2:])
+    yaw_only = ukf.StateSpaceModel(
+        motion=full.motion,
+        measurement=lambda x: x[2:],
+        state_residual=full.state_residual,
+        state_add=full.state_add,
+        state_mean=full.state_mean,
+        measurement_residual=lambda a, b: wrap_angle(a - b),
+        measurement_mean=lambda p, w: full.measurement_mean(jnp.pad(p, ((0, 0), (2, 0))), w)[2:],
+    )
     rng = np.random.default_rng(1)
     a = rng.normal(size=(3, 3))
     state = ukf.GaussianState(jnp.array([1.0, -2.0, 3.0]), jnp.asarray(a @ a.T + 0.1 * np.eye(3)))
@@ -206,8 +241,9 @@ def test_log_likelihood_gradient_matches_finite_differences(kind):
     @jax.jit
     def log_lik(flat):
         q = unflatten(flat)()
-        return ukf.filter(model, ukf.GaussianState(seq.poses[0], jnp.asarray(P0)), seq.increments, seq.fixes,
-                          q, jnp.asarray(r_true)).log_likelihood
+        return ukf.filter(
+            model, ukf.GaussianState(seq.poses[0], jnp.asarray(P0)), seq.increments, seq.fixes, q, jnp.asarray(r_true)
+        ).log_likelihood
 
     grad = np.asarray(jax.grad(log_lik)(flat0))
     fd = central_difference(lambda f: float(log_lik(f)), flat0, 1e-5)
@@ -222,17 +258,18 @@ def test_gradient_under_vmap_matches_per_sequence_and_finite_differences():
     @jax.jit
     def log_lik(log_std, seq):
         r = jnp.diag(jnp.exp(2 * log_std))
-        return ukf.filter(model, ukf.GaussianState(seq.poses[0], jnp.asarray(P0)), seq.increments, seq.fixes,
-                          jnp.asarray(Q), r).log_likelihood
+        return ukf.filter(
+            model, ukf.GaussianState(seq.poses[0], jnp.asarray(P0)), seq.increments, seq.fixes, jnp.asarray(Q), r
+        ).log_likelihood
 
     theta = jnp.log(jnp.array([0.4, 0.6, 0.04]))
     batched = jax.jit(jax.vmap(jax.grad(log_lik), in_axes=(None, 0)))(theta, seqs)
     single_grad = jax.jit(jax.grad(log_lik))
     for i in range(3):
-        seq = jax.tree.map(lambda a: a[i], seqs)
+        seq = jax.tree.map(lambda a, i=i: a[i], seqs)
         single = single_grad(theta, seq)
         np.testing.assert_allclose(batched[i], single, rtol=1e-10)
-        fd = central_difference(lambda t: float(log_lik(t, seq)), theta, 1e-5)
+        fd = central_difference(lambda t, seq=seq: float(log_lik(t, seq)), theta, 1e-5)
         np.testing.assert_allclose(batched[i], fd, rtol=1e-4)
 
 
@@ -243,8 +280,7 @@ def test_gradient_finite_when_covariances_are_nearly_rank_deficient():
 
     def log_lik(log_std):
         q = jnp.diag(jnp.exp(2 * log_std))
-        return ukf.filter(model, ukf.GaussianState(seq.poses[0], p0), seq.increments, seq.fixes, q,
-                          jnp.asarray(R)).log_likelihood
+        return ukf.filter(model, ukf.GaussianState(seq.poses[0], p0), seq.increments, seq.fixes, q, jnp.asarray(R)).log_likelihood
 
     theta = jnp.log(jnp.array([0.02, 0.01, 1e-7]))  # yaw motion noise ~ 1e-14 variance
     value, grad = jax.value_and_grad(log_lik)(theta)
@@ -259,7 +295,7 @@ def test_covariances_stay_symmetric_positive_definite_in_float32_over_100k_steps
 
     @jax.jit
     def run(seq):
-        f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+        f32 = lambda a: jnp.asarray(a, jnp.float32)
         res = ukf.filter(model, ukf.GaussianState(seq.poses[0], f32(P0)), seq.increments, seq.fixes, f32(Q), f32(R))
         return res.filtered_cov, res.predicted_cov, res.filtered_mean
 
@@ -277,9 +313,14 @@ def test_filter_blocks_equals_the_flat_filter_at_block_ends():
     steps, block = 30, 5
     seq = simulate_planar_sequence(jax.random.PRNGKey(7), steps * block, fix_dropout=0.5)
     flat = run_localization(seq.poses[0], seq)
-    blocks = ukf.filter_blocks(planar_pose_model(), ukf.GaussianState(seq.poses[0], jnp.asarray(P0)),
-                               seq.increments.reshape(steps, block, 3), seq.fixes.reshape(steps, block, 3),
-                               jnp.asarray(Q), jnp.asarray(R))
+    blocks = ukf.filter_blocks(
+        planar_pose_model(),
+        ukf.GaussianState(seq.poses[0], jnp.asarray(P0)),
+        seq.increments.reshape(steps, block, 3),
+        seq.fixes.reshape(steps, block, 3),
+        jnp.asarray(Q),
+        jnp.asarray(R),
+    )
     np.testing.assert_allclose(blocks.filtered_mean, flat.filtered_mean[block - 1 :: block], atol=1e-12)
     np.testing.assert_allclose(blocks.filtered_cov, flat.filtered_cov[block - 1 :: block], atol=1e-12)
     np.testing.assert_allclose(blocks.predicted_mean, flat.predicted_mean[::block], atol=1e-12)
@@ -301,12 +342,15 @@ def test_time_varying_noise_equals_stepwise_predict_update():
 
 def test_filter_works_under_jit_and_controls_may_be_none():
     model = ukf.StateSpaceModel(motion=lambda x, u: 0.9 * x, measurement=lambda x: x[:1])
-    run = jax.jit(lambda z: ukf.filter(model, ukf.GaussianState(jnp.zeros(2), jnp.eye(2)), None, z,
-                                       0.1 * jnp.eye(2), jnp.eye(1)).filtered_mean)
+    run = jax.jit(
+        lambda z: (
+            ukf.filter(model, ukf.GaussianState(jnp.zeros(2), jnp.eye(2)), None, z, 0.1 * jnp.eye(2), jnp.eye(1)).filtered_mean
+        )
+    )
     assert run(jnp.ones((5, 1))).shape == (5, 2)
 
 
-def test_bad_input_gives_clear_errors():
+def test_bad_input_gives_clear_errors(as_users_run):
     seq = simulate_planar_sequence(jax.random.PRNGKey(9), 10)
     with pytest.raises(ValueError, match="motion_cov must have shape"):
         run_localization(seq.poses[0], seq, q=np.eye(2))
@@ -317,12 +361,17 @@ def test_bad_input_gives_clear_errors():
     with pytest.raises(ValueError, match="measurements must have shape"):
         run_localization(seq.poses[0], seq._replace(fixes=seq.fixes[:, 0]))
     with pytest.raises(ValueError, match="initial cov"):
-        ukf.filter(planar_pose_model(), ukf.GaussianState(seq.poses[0], jnp.eye(2)), seq.increments, seq.fixes,
-                   jnp.asarray(Q), jnp.asarray(R))
+        ukf.filter(
+            planar_pose_model(),
+            ukf.GaussianState(seq.poses[0], jnp.eye(2)),
+            seq.increments,
+            seq.fixes,
+            jnp.asarray(Q),
+            jnp.asarray(R),
+        )
     with pytest.raises(ValueError, match="model.measurement must return"):
         model = ukf.StateSpaceModel(motion=lambda x, u: x, measurement=lambda x: x[:2])
-        ukf.filter(model, ukf.GaussianState(jnp.zeros(3), jnp.eye(3)), seq.increments, seq.fixes,
-                   jnp.asarray(Q), jnp.asarray(R))
+        ukf.filter(model, ukf.GaussianState(jnp.zeros(3), jnp.eye(3)), seq.increments, seq.fixes, jnp.asarray(Q), jnp.asarray(R))
     with pytest.raises(ValueError, match="mask must have the shape"):
         run_localization(seq.poses[0], seq, mask=jnp.ones((10, 2), bool))
 

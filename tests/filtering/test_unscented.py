@@ -6,9 +6,20 @@ from filterpy.kalman import JulierSigmaPoints, MerweScaledSigmaPoints
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from jbevo.geometry.angles import wrap_angle
-from jbevo.filtering.unscented import Julier, MerweScaled, circular_mean_fn, sigma_points, unscented_transform, wrapped_add_fn, wrapped_residual_fn
 from jbevo.filtering import linalg
+from jbevo.filtering.unscented import (
+    Julier,
+    MerweScaled,
+    circular_mean_fn,
+    sigma_points,
+    unscented_transform,
+    wrapped_add_fn,
+    wrapped_residual_fn,
+)
+from jbevo.geometry.angles import wrap_angle
+
+# Exactness against independent references needs float64 (conftest's fixture).
+pytestmark = pytest.mark.usefixtures("float64")
 
 
 def random_gaussian(rng, n):
@@ -16,7 +27,9 @@ def random_gaussian(rng, n):
     return jnp.asarray(rng.normal(size=n)), jnp.asarray(a @ a.T + 0.1 * np.eye(n))
 
 
-@pytest.mark.parametrize("scheme", [MerweScaled(), MerweScaled(1e-3, 2.0, 0.0), MerweScaled(np.sqrt(3), 2, 1), Julier(), Julier(0.5)])
+@pytest.mark.parametrize(
+    "scheme", [MerweScaled(), MerweScaled(1e-3, 2.0, 0.0), MerweScaled(np.sqrt(3), 2, 1), Julier(), Julier(0.5)]
+)
 @pytest.mark.parametrize("n", [1, 2, 3, 6])
 def test_weights_sum_to_one(scheme, n):
     w = scheme.weights(n)
@@ -69,7 +82,7 @@ def test_square_is_exact_with_kappa_two(mu, sigma):
 
 def test_cholesky_input_equals_covariance_input_and_noise_is_added():
     mean, cov = random_gaussian(np.random.default_rng(3), 3)
-    fn = lambda x: jnp.stack([jnp.sin(x[0]) * x[1], x[2] ** 3])  # noqa: E731
+    fn = lambda x: jnp.stack([jnp.sin(x[0]) * x[1], x[2] ** 3])
     noise = jnp.diag(jnp.array([0.1, 0.2]))
     r1 = unscented_transform(fn, mean, cov, noise_cov=noise)
     r2 = unscented_transform(fn, mean, chol=jnp.linalg.cholesky(cov), noise_cov=noise)
@@ -90,7 +103,7 @@ def test_angles_are_averaged_and_differenced_on_the_circle():
         input_residual_fn=wrapped_residual_fn([1]),
         input_add_fn=wrapped_add_fn([1]),
     )
-    fn = lambda x: jnp.stack([2.0 * x[0], wrap_angle(x[1])])  # noqa: E731
+    fn = lambda x: jnp.stack([2.0 * x[0], wrap_angle(x[1])])
     r = unscented_transform(fn, mean, cov, **kw)
     np.testing.assert_allclose(r.mean, [2.0, np.pi - 0.01], atol=1e-12)
     np.testing.assert_allclose(r.cov, np.diag([0.16, 0.09]), atol=1e-12)
@@ -108,7 +121,7 @@ def test_jit_vmap_grad():
     assert np.all(np.isfinite(g))
 
 
-def test_bad_input_is_rejected():
+def test_bad_input_is_rejected(as_users_run):
     with pytest.raises(ValueError, match="exactly one"):
         unscented_transform(jnp.sin, jnp.zeros(2))
     with pytest.raises(ValueError, match="cov must have shape"):

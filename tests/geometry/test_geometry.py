@@ -1,12 +1,16 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from jbevo.geometry.angles import wrap_angle
 from jbevo.geometry.se2 import se2_between, se2_compose
 from jbevo.geometry.sincos import sincos
-from jbevo.geometry.angles import wrap_angle
+
+# Exactness against independent references needs float64 (conftest's fixture).
+pytestmark = pytest.mark.usefixtures("float64")
 
 finite = st.floats(-50.0, 50.0, allow_nan=False)
 
@@ -42,8 +46,15 @@ def test_se2_compose_frames():
 def test_sincos_matches_numpy_in_float64():
     rng = np.random.default_rng(0)
     quarter_turns = np.arange(-200, 201) * (np.pi / 2)
-    x = np.concatenate([rng.uniform(-1e5, 1e5, 200_000), rng.uniform(-7, 7, 100_000), quarter_turns,
-                        np.nextafter(quarter_turns, np.inf), [0.0, -0.0, 1e-300, np.pi / 4, -np.pi / 4]])
+    x = np.concatenate(
+        [
+            rng.uniform(-1e5, 1e5, 200_000),
+            rng.uniform(-7, 7, 100_000),
+            quarter_turns,
+            np.nextafter(quarter_turns, np.inf),
+            [0.0, -0.0, 1e-300, np.pi / 4, -np.pi / 4],
+        ]
+    )
     s, c = jax.jit(sincos)(jnp.asarray(x))
     assert s.dtype == c.dtype == jnp.float64
     assert np.abs(np.asarray(s) - np.sin(x)).max() <= 2.3e-16

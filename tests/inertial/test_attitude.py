@@ -9,12 +9,16 @@ import pytest
 
 from jbevo.data.synthetic.imu import ADIS16448, planar_body_velocity, simulate_imu
 from jbevo.geometry.euler import body_rates, rotation_zyx
-from jbevo.inertial.kinematics import GRAVITY
 from jbevo.inertial.attitude_filter import AttitudeFilter
-from jbevo.inertial.kinematics import accel_tilt, euler_rates, tilt_measurements
+from jbevo.inertial.kinematics import (
+    GRAVITY,
+    accel_tilt,
+    euler_rates,
+    tilt_measurements,
+)
 
 
-def test_euler_rates_invert_the_simulators_body_rates():
+def test_euler_rates_invert_the_simulators_body_rates(float64):
     rng = np.random.default_rng(0)
     e = np.stack([rng.uniform(-3, 3, 20), rng.uniform(-0.5, 0.5, 20), rng.uniform(-0.5, 0.5, 20)], -1)
     e_dot = rng.normal(size=(20, 3))
@@ -24,7 +28,7 @@ def test_euler_rates_invert_the_simulators_body_rates():
     np.testing.assert_allclose(roll_dot, e_dot[:, 2], atol=1e-12)
 
 
-def test_tilt_of_gravity_is_exact():
+def test_tilt_of_gravity_is_exact(float64):
     rng = np.random.default_rng(1)
     e = np.stack([rng.uniform(-3, 3, 20), rng.uniform(-1, 1, 20), rng.uniform(-1, 1, 20)], -1)
     f = np.einsum("nji,j->ni", rotation_zyx(e), [0.0, 0.0, GRAVITY])
@@ -85,7 +89,7 @@ def test_missing_samples_are_skipped(drive):
     assert np.isnan(np.asarray(tilt_measurements(holed_accel))[5]).all()
 
 
-def test_gradients_match_finite_differences(drive):
+def test_gradients_match_finite_differences(float64, drive):
     gyro, accel, velocity, truth, initial = drive
     gyro, accel, velocity, truth = gyro[:100], accel[:100], velocity[:100], jnp.asarray(truth[:100])
 
@@ -104,7 +108,7 @@ def test_gradients_match_finite_differences(drive):
         assert float(g[i]) == pytest.approx(float(fd), rel=1e-4)
 
 
-def test_bad_input_is_named():
+def test_bad_input_is_named(as_users_run):
     f = AttitudeFilter.create()
     with pytest.raises(ValueError, match=r"\(T, S, 3\)"):
         f(jnp.zeros((5, 10, 3)), jnp.zeros((5, 10, 2)))
@@ -116,9 +120,9 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
     """Fed the true speed, the speed-aided filter keeps pitch and roll within a few tenths of a
     degree on a procedural drive that starts at rest and accelerates at up to 2 m/s^2, where the
     accelerometer's own tilt is off by degrees."""
-    from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
     from jbevo.data.synthetic.imu import ADIS16448, simulate_imu
     from jbevo.data.synthetic.trajectories import procedural_drive
+    from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 
     times, poses = procedural_drive(4, 301)
     imu = simulate_imu(times, poses, noise=ADIS16448, seed=1, smoothing=None)
@@ -138,6 +142,7 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
             g, a, v = x
             st = f.update_lateral_tilt(f.update_speed(f.predict(st, g, a), v), g, a).astype(jnp.float32)
             return st, st.pitch_roll
+
         return jax.lax.scan(step, state, (gyro, accel, jnp.asarray(speed, jnp.float32)))[1]
 
     estimate = np.asarray(run(state))

@@ -6,15 +6,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from tests.helpers import check_leaf_gradients
 
 from jbevo.data.synthetic.imu import NOISELESS
-from jbevo.data.synthetic.sequences import make_sequence, procedural_sequence, small_camera
-from jbevo.geometry.euler import poses_from_euler
+from jbevo.data.synthetic.sequences import (
+    make_sequence,
+    procedural_sequence,
+    small_camera,
+)
 from jbevo.data.synthetic.world import World
+from jbevo.geometry.bev_grid import BevGrid
+from jbevo.geometry.euler import poses_from_euler
 from jbevo.models.bevo import Bevo
 from jbevo.models.losses import motion_loss, relative_motion
-from jbevo.geometry.bev_grid import BevGrid
+from tests.helpers import check_leaf_gradients
 
 CAMERA = small_camera()
 GRID = BevGrid(0.1, (64, 64), near=7.5)
@@ -72,7 +76,7 @@ def test_learnable_parameters_and_sources():
         Bevo.create(GRID, attitude_source="gps")
 
 
-def test_gradient_of_the_loss_matches_finite_differences(world):
+def test_gradient_of_the_loss_matches_finite_differences(float64, world):
     """Every learnable leaf, central differences in float64 (the test session enables x64; the
     model then computes in float64). The loss has kinks where a correlation peak changes its
     integer position, so the step is small (1e-5)."""

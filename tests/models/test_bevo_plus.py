@@ -5,24 +5,24 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from tests.helpers import check_leaf_gradients
 
-from jbevo.vision.bands import BandGeometry
-from jbevo.vision.bev import bev_project
 from jbevo import data
 from jbevo.data.map import Map
-from jbevo.data.synthetic.scenes import SCENE_KINDS, scene
 from jbevo.data.splits import part_range
+from jbevo.data.synthetic.scenes import SCENE_KINDS, scene
 from jbevo.data.synthetic.world import World
-from jbevo.geometry.se2 import se2_between, se2_compose
-from jbevo.geometry.angles import wrap_angle
-from jbevo.models.bevo_plus import BevoPlus
-from jbevo.models.losses import localization_loss
-from jbevo.vision.map_matching import map_crop, match_to_map
-from jbevo.filtering.planar import planar_pose_model
-from jbevo.models.presets import localization_model
 from jbevo.eval.scores import pose_errors
 from jbevo.filtering import ukf
+from jbevo.filtering.planar import planar_pose_model
+from jbevo.geometry.angles import wrap_angle
+from jbevo.geometry.se2 import se2_between, se2_compose
+from jbevo.models.bevo_plus import BevoPlus
+from jbevo.models.losses import localization_loss
+from jbevo.models.presets import localization_model
+from jbevo.vision.bands import BandGeometry
+from jbevo.vision.bev import bev_project
+from jbevo.vision.map_matching import map_crop, match_to_map
+from tests.helpers import check_leaf_gradients
 
 
 def kitti_planar(path):
@@ -33,7 +33,7 @@ def kitti_planar(path):
     return jnp.asarray(np.stack([x, y, yaw], axis=-1))
 
 
-def test_model_composes_increments_and_wraps_yaw():
+def test_model_composes_increments_and_wraps_yaw(float64):
     model = planar_pose_model()
     assert model is planar_pose_model()  # cached: one compilation for jitted callers
     out = model.motion(jnp.array([0.0, 0.0, np.pi - 0.1]), jnp.array([1.0, 0.0, 0.2]))
@@ -51,13 +51,19 @@ def test_fuses_real_kitti_motion_better_than_odometry_or_fixes_alone(reference_d
     fixes = fixes.at[:, 2].set(wrap_angle(fixes[:, 2]))
     fixes = jnp.where(jax.random.uniform(k_drop, (len(fixes), 1)) < 0.3, jnp.nan, fixes)
 
-    res = ukf.filter(planar_pose_model(), ukf.GaussianState(truth[0], jnp.diag(fix_std**2)), increments, fixes,
-                     jnp.diag(odo_std**2), jnp.diag(fix_std**2))
+    res = ukf.filter(
+        planar_pose_model(),
+        ukf.GaussianState(truth[0], jnp.diag(fix_std**2)),
+        increments,
+        fixes,
+        jnp.diag(odo_std**2),
+        jnp.diag(fix_std**2),
+    )
     filt_err = np.linalg.norm(np.asarray(res.filtered_mean[:, :2] - truth[1:, :2]), axis=1)
     fix_err = np.linalg.norm(np.asarray(fixes[:, :2] - truth[1:, :2]), axis=1)
     dead_reckoning = jax.lax.scan(lambda p, d: (se2_compose(p, d), se2_compose(p, d)), truth[0], increments)[1]
     odo_err = np.linalg.norm(np.asarray(dead_reckoning[:, :2] - truth[1:, :2]), axis=1)
-    rmse = lambda e: float(np.sqrt(np.nanmean(e**2)))  # noqa: E731
+    rmse = lambda e: float(np.sqrt(np.nanmean(e**2)))
     assert rmse(filt_err) < 0.6 * rmse(fix_err)
     assert rmse(filt_err) < 0.2 * rmse(odo_err)
     yaw_err = np.abs(np.asarray(wrap_angle(res.filtered_mean[:, 2] - truth[1:, 2])))
@@ -94,9 +100,9 @@ def test_map_crop_samples_the_map_where_the_grid_lies():
     r0, k0 = np.floor(r[ok]).astype(int), np.floor(k[ok]).astype(int)
     fr, fk = r[ok] - r0, k[ok] - k0
     im = image.astype(float)
-    at = lambda dr, dk: im[np.minimum(r0 + dr, 199), np.minimum(k0 + dk, 299)]  # noqa: E731
+    at = lambda dr, dk: im[np.minimum(r0 + dr, 199), np.minimum(k0 + dk, 299)]
     expected = (1 - fr) * ((1 - fk) * at(0, 0) + fk * at(0, 1)) + fr * ((1 - fk) * at(1, 0) + fk * at(1, 1))
-    np.testing.assert_allclose(np.asarray(crop)[ok] * 255, expected, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(crop)[ok] * 255, expected, atol=5e-3)  # float32 against float64
     assert np.all(np.asarray(crop)[~ok] == 0) and 0 < ok.mean() < 1  # the grid hangs over the map's edge
     grad = jax.grad(lambda p: jnp.sum(map_crop(m, p, grid)[0] * jnp.arange(64.0)[:, None]))(pose)
     assert np.all(np.isfinite(grad)) and np.any(grad != 0)
@@ -106,9 +112,17 @@ def test_match_recovers_the_pose_and_the_pitch_error(carla):
     seq, m = carla.sequence, carla.map
     grid = SCENE_KINDS["carla"].grids()[1]
     model = BevoPlus.create(map_grid=grid)
-    match = jax.jit(lambda img, pitch, roll, pose: match_to_map(
-        *bev_project(img.astype(jnp.float64) / 255, pitch, roll, seq.camera, grid), m, pose, grid, model.map_dpc,
-        seq.camera.height, jnp.exp(model.log_pitch_gain)))
+    match = jax.jit(
+        lambda img, pitch, roll, pose: match_to_map(
+            *bev_project(img.astype(jnp.float32) / 255, pitch, roll, seq.camera, grid),
+            m,
+            pose,
+            grid,
+            model.map_dpc,
+            seq.camera.height,
+            jnp.exp(model.log_pitch_gain),
+        )
+    )
     rng = np.random.default_rng(1)
     for t in (20, 35, 50):
         truth = np.asarray(seq.planar[t])
@@ -136,8 +150,9 @@ def test_bevo_plus_stays_on_the_map_where_odometry_drifts(carla):
     assert pose_errors(odometry.poses, seq.planar)["final_position_error_m"] > 2 * err["final_position_error_m"]
     # vmap over sequences sharing the map equals one at a time
     both = eqx.filter_jit(jax.vmap(lambda mod, s, mp: mod(s, mp, warm_start=True), in_axes=(None, 0, None)))(
-        model, data.stack([seq, seq]), m)
-    np.testing.assert_allclose(both.poses[1], out.poses, atol=1e-6)
+        model, data.stack([seq, seq]), m
+    )
+    np.testing.assert_allclose(both.poses[1], out.poses, atol=1e-4)  # float32: batched FFTs round differently
     with pytest.raises(ValueError, match="map image"):
         model(seq, Map(m.image[None], m.x_max, m.y_max, m.resolution))
 
@@ -172,7 +187,7 @@ def test_a_large_initial_pose_error_is_corrected(carla):
     assert err[0] < 1.0 and err[-10:].max() < 0.3
 
 
-def test_gradient_of_the_loss_matches_finite_differences(world):
+def test_gradient_of_the_loss_matches_finite_differences(float64, world):
     """Every learnable leaf of the localizer itself (the odometry's are checked in
     test_odometry), central differences in float64."""
     assert jnp.result_type(float) == jnp.float64

@@ -6,9 +6,9 @@ import numpy as np
 import optax
 import pytest
 
+from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.training import checkpoint
-from jbevo.geometry.bev_grid import BevGrid
 
 
 def test_round_trip_keeps_values_structure_and_optimizer_state(tmp_path):
@@ -81,8 +81,15 @@ def test_every_static_setting_of_a_non_default_model_round_trips(tmp_path):
     from jbevo.models.bevo_plus import BevoPlus
 
     odometry = Bevo.create(
-        BevGrid(0.05, (32, 48), near=3.0), gyro_window=0.03, bands=True,
-        n_radii=32, min_radius=0.03, max_radius=0.3, window_taper=0.4, peak_half_width=3, pad=1,
+        BevGrid(0.05, (32, 48), near=3.0),
+        gyro_window=0.03,
+        bands=True,
+        n_radii=32,
+        min_radius=0.03,
+        max_radius=0.3,
+        window_taper=0.4,
+        peak_half_width=3,
+        pad=1,
     )
     odometry = dataclasses.replace(odometry, feather=2)
     model = BevoPlus.create(odometry, BevGrid(0.1, (32, 32), near=3.0), n_angles=64, n_radii=16, reacquire_after=7)

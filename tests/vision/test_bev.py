@@ -7,10 +7,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jbevo.geometry.bev_grid import BevGrid
-from jbevo.geometry.camera import Camera, level_to_body, level_to_camera, project_ground_points
-from jbevo.vision.bev import bev_increment, bev_project
 
+from jbevo.geometry.bev_grid import BevGrid
+from jbevo.geometry.camera import (
+    Camera,
+    level_to_body,
+    level_to_camera,
+    project_ground_points,
+)
+from jbevo.vision.bev import bev_increment, bev_project
 
 KITTI = Camera.kitti()
 GRID = BevGrid(resolution=0.05, shape=(200, 160), near=5.0)  # 5-15 m ahead, +-4 m lateral
@@ -25,7 +30,7 @@ def render(camera: Camera, pitch: float, roll: float, texture) -> np.ndarray:
     k = np.asarray(camera.intrinsics, float)
     u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
     rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(k).T
-    r_cl = np.asarray(level_to_camera(camera, jnp.float64(pitch), jnp.float64(roll)), float)
+    r_cl = np.asarray(level_to_camera(camera, pitch, roll), float)
     d = rays @ r_cl  # level-frame directions (R^T d_cam, row-vector form)
     down = d[..., 2] < -1e-9
     s = np.where(down, float(camera.height) / np.where(down, -d[..., 2], 1.0), 0.0)
@@ -61,8 +66,8 @@ def blob_errors(bev: np.ndarray, valid: np.ndarray, grid: BevGrid) -> np.ndarray
 def test_projection_matches_opencv():
     xy = np.array([[5.0, 0.0], [8.0, 2.5], [12.0, -3.0], [20.0, 6.0]])
     for pitch, roll in [(0.0, 0.0), (0.05, -0.03), (-0.08, 0.07)]:
-        uv, front = project_ground_points(KITTI, jnp.float64(pitch), jnp.float64(roll), jnp.asarray(xy))
-        r = np.asarray(level_to_camera(KITTI, jnp.float64(pitch), jnp.float64(roll)), float)
+        uv, front = project_ground_points(KITTI, pitch, roll, jnp.asarray(xy, jnp.float32))
+        r = np.asarray(level_to_camera(KITTI, pitch, roll), float)
         centre = np.array([0.0, 0.0, float(KITTI.height)])
         pts = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
         ref, _ = cv2.projectPoints(pts, cv2.Rodrigues(r)[0], -r @ centre, np.asarray(KITTI.intrinsics, float), None)
@@ -130,7 +135,7 @@ def test_batched_frames_equal_single_frames():
     assert valid.any()
 
 
-def test_gradients_with_respect_to_pitch_roll_and_image():
+def test_gradients_with_respect_to_pitch_roll_and_image(float64):
     small = Camera(200.0, 200.0, 80.0, 10.0, (64, 160), 1.5)
     grid = BevGrid(0.1, (32, 32), near=6.0)
     u, v = np.meshgrid(np.arange(160.0), np.arange(64.0))
@@ -155,7 +160,7 @@ def test_gradients_with_respect_to_pitch_roll_and_image():
         assert float(g[i]) == pytest.approx(float(fd), rel=1e-3)
 
 
-def test_bad_input_is_named():
+def test_bad_input_is_named(as_users_run):
     with pytest.raises(ValueError, match="camera's shape"):
         bev_project(jnp.zeros((10, 10)), 0.0, 0.0, KITTI, GRID)
     with pytest.raises(ValueError, match="height must be positive"):

@@ -16,8 +16,8 @@ import skimage.data
 from skimage.registration import phase_cross_correlation
 
 from jbevo.vision.dpc_params import DPCParams
-from jbevo.vision.registration import register, register_translation
 from jbevo.vision.phase_correlation import rotate_image, soft_argmax_1d
+from jbevo.vision.registration import register, register_translation
 
 SIZE = 96
 FAST = DPCParams(n_angles=256, n_radii=32)
@@ -188,7 +188,7 @@ def test_unrelated_images_have_low_confidence():
     assert register(a, a, FAST).confidence > 0.9
 
 
-def test_bad_input_is_named():
+def test_bad_input_is_named(as_users_run):
     good = jnp.zeros((32, 32))
     with pytest.raises(ValueError, match="same shape"):
         register(good, jnp.zeros((32, 31)))
@@ -203,6 +203,8 @@ def test_bad_input_is_named():
         register(good, nan)
     with pytest.raises(Exception, match="image a contains NaN or inf"):
         jax.jit(register_translation)(nan, good)
+    with pytest.raises(ValueError, match="rotation_prior"):
+        register(jnp.zeros((32, 32), jnp.float32), jnp.zeros((32, 32), jnp.float32), rotation_prior=jnp.zeros(3))
 
 
 def test_soft_argmax_is_unbiased_on_a_gaussian_peak():
@@ -262,7 +264,7 @@ def central_difference(f, x, v, h):
     return (f(x + h * v) - f(x - h * v)) / (2 * h)
 
 
-def test_jvp_matches_finite_differences_for_the_image():
+def test_jvp_matches_finite_differences_for_the_image(float64):
     a, b = smooth_pair()  # float64 (x64 is on in the tests): FD is not drowned by rounding
     rng = np.random.default_rng(5)
     v = jnp.asarray(ndi.gaussian_filter(rng.normal(size=b.shape), 2.0))
@@ -288,7 +290,7 @@ def test_jvp_matches_finite_differences_for_the_image():
         "log_radial_width",
     ],
 )
-def test_jvp_matches_finite_differences_for_each_parameter(leaf):
+def test_jvp_matches_finite_differences_for_each_parameter(float64, leaf):
     a, b = smooth_pair()
     params = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64), SMALL)
 
@@ -318,9 +320,9 @@ def test_rotation_prior_searches_near_it_and_picks_the_half_turn(gravel):
     # A prior 10 deg off with a 2 deg window cannot reach the true peak: it lands in the window.
     off = register(jnp.float32(a), jnp.float32(b), rotation_prior=jnp.float32(0.05 + np.radians(10)))
     assert np.degrees(abs(float(off.rotation) - (0.05 + np.radians(10)))) <= 2.0 + 0.5
-    flipped = register(jnp.float32(a), jnp.float32(warp(gravel, 0.05 - np.pi, (2.0, -3.0))), rotation_prior=jnp.float32(0.05 - np.pi))
+    flipped = register(
+        jnp.float32(a), jnp.float32(warp(gravel, 0.05 - np.pi, (2.0, -3.0))), rotation_prior=jnp.float32(0.05 - np.pi)
+    )
     assert np.degrees(angle_diff(flipped.rotation, 0.05 - np.pi)) < 0.1
     batch = register(jnp.stack([jnp.float32(a)] * 2), jnp.stack([jnp.float32(b)] * 2), rotation_prior=jnp.float32([0.06, 0.04]))
     assert batch.rotation.shape == (2,)
-    with pytest.raises(ValueError, match="rotation_prior"):
-        register(jnp.float32(a), jnp.float32(b), rotation_prior=jnp.zeros(3))

@@ -36,7 +36,7 @@ def reading(what: str) -> Iterator[None]:
         raise CommandError(f"{what}: {error}") from None
 
 
-def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace], int | None], argv: Sequence[str] | None) -> int:
+def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace], object], argv: Sequence[str] | None) -> int:
     """Parse ``argv`` (exit 2 on a usage error) and run ``command``; a :class:`CommandError`
     prints ``prog: error: message`` and gives 1."""
     args = parser.parse_args(argv)
@@ -77,11 +77,13 @@ class GridAction(argparse.Action):
     the nearest distance covered (metres, float); stored as a :class:`BevGrid`."""
 
     def __call__(self, parser, namespace, values, option_string=None):
-        res, size, near = values
+        res, size, near = list(values or ())
         try:
             resolution, pixels, nearest = float(res), int(size), float(near)
         except ValueError:
-            parser.error(f"{option_string} takes RES (metres per pixel), SIZE (whole pixels) and NEAR (metres), got {' '.join(values)}")
+            parser.error(
+                f"{option_string} takes RES (metres per pixel), SIZE (whole pixels) and NEAR (metres), got {res} {size} {near}"
+            )
         if not resolution > 0 or pixels < 16:
             parser.error(f"{option_string} needs RES > 0 and SIZE >= 16, got {res} and {size}")
         setattr(namespace, self.dest, BevGrid(resolution, (pixels, pixels), near=nearest))
@@ -91,7 +93,11 @@ def grid_option(default: BevGrid) -> argparse.ArgumentParser:
     """A parent parser with ``--grid RES SIZE NEAR`` (the BEV)."""
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument(
-        "--grid", nargs=3, action=GridAction, default=default, metavar=("RES", "SIZE", "NEAR"),
+        "--grid",
+        nargs=3,
+        action=GridAction,
+        default=default,
+        metavar=("RES", "SIZE", "NEAR"),
         help="BEV: metres per pixel, pixels per side, nearest metres ahead",
     )
     return p
@@ -103,8 +109,12 @@ def dataset_options(default_frames: int) -> argparse.ArgumentParser:
     p.add_argument("--dataset", choices=DATASETS, default="synthetic")
     p.add_argument("--kitti-poses", type=Path, help="folder of KITTI pose files NN.txt (kitti-synthetic)")
     p.add_argument("--kitti-root", type=Path, help="KITTI odometry root folder (kitti)")
-    p.add_argument("--frames", type=non_negative_int, default=default_frames,
-                   help="frames per sequence (synthetic; a cap for kitti-synthetic, 0 = all)")
+    p.add_argument(
+        "--frames",
+        type=non_negative_int,
+        default=default_frames,
+        help="frames per sequence (synthetic; a cap for kitti-synthetic, 0 = all)",
+    )
     p.add_argument("--town", choices=sorted(TOWNS), default="town01", help="synthetic world")
     p.add_argument("--camera", choices=("small", "kitti"), default="small", help="kitti-synthetic camera: 128x416 or 376x1241")
     return p
@@ -152,6 +162,17 @@ def json_args(args: argparse.Namespace) -> dict:
 
 
 __all__ = [
-    "CommandError", "GridAction", "dataset_options", "grid_option", "json_args", "non_negative_int", "optimizer_options",
-    "parser", "positive_float", "positive_int", "reading", "run", "seed_option",
+    "CommandError",
+    "GridAction",
+    "dataset_options",
+    "grid_option",
+    "json_args",
+    "non_negative_int",
+    "optimizer_options",
+    "parser",
+    "positive_float",
+    "positive_int",
+    "reading",
+    "run",
+    "seed_option",
 ]

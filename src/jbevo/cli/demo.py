@@ -41,6 +41,7 @@ class NoiseModel(eqx.Module):
 
 
 def run_filter(noise: NoiseModel, seq: PlanarSequence) -> ukf.FilterResult:
+    """The planar pose UKF with ``noise`` over one simulated drive."""
     prior = ukf.GaussianState(seq.poses[0], jnp.diag(jnp.array([0.1, 0.1, 0.01])))
     return ukf.filter(planar_pose_model(), prior, seq.increments, seq.fixes, noise.motion(), noise.measurement())
 
@@ -59,6 +60,7 @@ def loss(noise: NoiseModel, seqs: PlanarSequence, yaw_weight: float = 10.0) -> j
 
 
 def summary(noise: NoiseModel, seqs: PlanarSequence) -> dict:
+    """Validation position RMSE and maximum (m) and mean yaw error (deg) over the drives."""
     pos, yaw = jax.jit(jax.vmap(errors, in_axes=(None, 0)))(noise, seqs)
     return {
         "position_rmse_m": float(jnp.sqrt(jnp.mean(pos**2))),
@@ -69,12 +71,13 @@ def summary(noise: NoiseModel, seqs: PlanarSequence) -> dict:
 
 def simulate(key, count: int, steps: int) -> PlanarSequence:
     keys = jax.random.split(key, count)
-    return jax.vmap(
-        lambda k: simulate_planar_sequence(k, steps, odometry_std=ODOMETRY_STD, fix_std=FIX_STD, fix_dropout=0.2)
-    )(keys)
+    return jax.vmap(lambda k: simulate_planar_sequence(k, steps, odometry_std=ODOMETRY_STD, fix_std=FIX_STD, fix_dropout=0.2))(
+        keys
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser."""
     p = common.parser("python -m jbevo.demo", __doc__, [common.seed_option()])
     p.add_argument("--steps", type=common.positive_int, default=300, help="steps per drive (default 300)")
     p.add_argument("--train", type=common.positive_int, default=16, help="training drives (default 16)")
@@ -94,7 +97,7 @@ def demo(args: argparse.Namespace) -> dict:
         DiagonalCovariance.from_std(jnp.array(FIX_STD) * 5),
     )
     optimizer = optax.adam(args.lr)
-    opt_state = optimizer.init(noise)
+    opt_state = optimizer.init(eqx.filter(noise, eqx.is_inexact_array))
 
     @eqx.filter_jit
     def train_step(noise, opt_state):
@@ -103,8 +106,10 @@ def demo(args: argparse.Namespace) -> dict:
         return eqx.apply_updates(noise, updates), opt_state, value
 
     before = summary(noise, val)
-    print(f"validation before: position RMSE {before['position_rmse_m']:.3f} m, "
-          f"max {before['position_max_m']:.3f} m, mean yaw error {before['yaw_mean_deg']:.3f} deg")
+    print(
+        f"validation before: position RMSE {before['position_rmse_m']:.3f} m, "
+        f"max {before['position_max_m']:.3f} m, mean yaw error {before['yaw_mean_deg']:.3f} deg"
+    )
     start = time.perf_counter()
     for it in range(args.iterations):
         noise, opt_state, value = train_step(noise, opt_state)
@@ -112,16 +117,24 @@ def demo(args: argparse.Namespace) -> dict:
             print(f"  iteration {it:4d}  training loss {float(value):.5f}")
     seconds = time.perf_counter() - start
     after = summary(noise, val)
-    print(f"validation after:  position RMSE {after['position_rmse_m']:.3f} m, "
-          f"max {after['position_max_m']:.3f} m, mean yaw error {after['yaw_mean_deg']:.3f} deg")
+    print(
+        f"validation after:  position RMSE {after['position_rmse_m']:.3f} m, "
+        f"max {after['position_max_m']:.3f} m, mean yaw error {after['yaw_mean_deg']:.3f} deg"
+    )
     learned = {
         "motion_std": [float(v) for v in jnp.exp(noise.motion.log_std)],
         "measurement_std": [float(v) for v in jnp.exp(noise.measurement.log_std)],
     }
     print(f"learned odometry std {learned['motion_std']} (true {list(ODOMETRY_STD)})")
     print(f"learned fix std      {learned['measurement_std']} (true {list(FIX_STD)})")
-    metrics = {"before": before, "after": after, "learned": learned, "true": {"motion_std": list(ODOMETRY_STD), "measurement_std": list(FIX_STD)},
-               "train_seconds": seconds, "args": common.json_args(args)}
+    metrics = {
+        "before": before,
+        "after": after,
+        "learned": learned,
+        "true": {"motion_std": list(ODOMETRY_STD), "measurement_std": list(FIX_STD)},
+        "train_seconds": seconds,
+        "args": common.json_args(args),
+    }
     if args.out is not None:
         write_json_atomic(args.out / "metrics.json", metrics)
         print(f"wrote {args.out / 'metrics.json'}")
@@ -129,6 +142,7 @@ def demo(args: argparse.Namespace) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command with ``argv`` (default: the process's arguments); returns the exit code."""
     return common.run(build_parser(), demo, argv)
 
 

@@ -27,15 +27,15 @@ import numpy as np
 from jbevo.cli import common
 from jbevo.data import splits
 from jbevo.data.catalog import load_sequences
+from jbevo.data.pose_files import write_kitti
 from jbevo.eval.batch import run_many
 from jbevo.eval.plots import trajectory_top_view
-from jbevo.eval.pose_files import write_kitti
 from jbevo.eval.scores import format_scores, score, segment_lengths
 from jbevo.files import write_json_atomic
+from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.progress import progress
 from jbevo.training import checkpoint
-from jbevo.geometry.bev_grid import BevGrid
 
 ATTITUDE_SOURCES = ("filter", "zero", "accel", "truth")
 
@@ -49,30 +49,43 @@ def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str, b
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = common.parser("python -m jbevo.evaluate", __doc__, [
-        common.dataset_options(default_frames=120), common.grid_option(BevGrid(0.1, (128, 128), near=7.5)),
-        common.seed_option(1000, "first seed of the synthetic drives (training uses 0..)"),
-    ])
+    """The command's argument parser."""
+    p = common.parser(
+        "python -m jbevo.evaluate",
+        __doc__,
+        [
+            common.dataset_options(default_frames=120),
+            common.grid_option(BevGrid(0.1, (128, 128), near=7.5)),
+            common.seed_option(1000, "first seed of the synthetic drives (training uses 0..)"),
+        ],
+    )
     p.add_argument("--checkpoint", type=Path, help="a checkpoint file or a training output folder (its best.ckpt)")
     p.add_argument("--sequences", nargs="+", help="sequence names (KITTI datasets) or count (synthetic; default 4)")
     p.add_argument("--attitude", choices=ATTITUDE_SOURCES, default="filter", help="pitch/roll for the BEV")
     p.add_argument("--warm-start", action="store_true", help="start from the truth's attitude and speed")
-    p.add_argument("--bands", action="store_true", help="hand-set model with the band geometry (jbevo.vision.bands; a checkpoint brings its own)")
+    p.add_argument(
+        "--bands",
+        action="store_true",
+        help="hand-set model with the band geometry (jbevo.vision.bands; a checkpoint brings its own)",
+    )
     p.add_argument("--out", type=Path, default=Path("runs/evaluation"))
     return p
 
 
 def evaluate(args: argparse.Namespace) -> int:
+    """Evaluate BEVO on the chosen sequences and write poses, plots and metrics."""
     if args.dataset == "synthetic":
         try:
             count = int(args.sequences[0]) if args.sequences else 4
         except ValueError:
             raise common.CommandError(f"--sequences for the synthetic dataset is a count, got {args.sequences[0]!r}") from None
-        names = [str(args.seed + i) for i in range(count)]
+        names: list[str] = [str(args.seed + i) for i in range(count)]
     else:
-        names = args.sequences or list(splits.KITTI_TEST)
+        names = list(args.sequences or splits.KITTI_TEST)
     with common.reading(f"the {args.dataset} dataset"):
-        seqs = load_sequences(args.dataset, names, args.frames, args.kitti_poses, args.kitti_root, args.camera, args.town, seed=args.seed)
+        seqs = load_sequences(
+            args.dataset, names, args.frames, args.kitti_poses, args.kitti_root, args.camera, args.town, seed=args.seed
+        )
     if args.dataset == "synthetic":
         names = [f"synthetic_{n}" for n in names]
     lengths = segment_lengths(args.dataset, args.frames)
@@ -85,24 +98,39 @@ def evaluate(args: argparse.Namespace) -> int:
     for name, out, seq in progress(list(zip(names, outputs, seqs)), "writing poses and plots"):
         write_kitti(args.out / "poses" / f"{name}.txt", np.asarray(out.poses, float))
         write_kitti(args.out / "poses" / f"{name}_gt.txt", np.asarray(seq.planar, float))
-        trajectory_top_view(args.out / "plots" / f"{name}.png", np.asarray(seq.planar), {"BEVO": np.asarray(out.poses)}, title=name)
+        trajectory_top_view(
+            args.out / "plots" / f"{name}.png", np.asarray(seq.planar), {"BEVO": np.asarray(out.poses)}, title=name
+        )
         s = score(out, seq, lengths)
-        per_sequence[name] = {k: s[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "motion_rmse_m", "yaw_rmse_deg", "segments")}
+        per_sequence[name] = {
+            k: s[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "motion_rmse_m", "yaw_rmse_deg", "segments")
+        }
         print(f"{name}: {format_scores(s)}")
     overall = score(outputs, seqs, lengths)  # the devkit pools the segments of all sequences
     overall = {k: overall[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "motion_rmse_m", "yaw_rmse_deg", "segments")}
     overall["frames_per_s"] = fps
-    print(f"overall: {format_scores(overall | {'segment_lengths_m': list(lengths)})}  {fps:.0f} frames/s on {len(jax.local_devices())} device(s)")
-    write_json_atomic(args.out / "metrics.json", {
-        "overall": overall, "per_sequence": per_sequence, "segment_lengths_m": list(lengths),
-        "checkpoint": str(args.checkpoint) if args.checkpoint else None, "attitude": args.attitude, "bands": model.bands is not None,
-        "warm_start": args.warm_start, "devices": [str(d) for d in jax.local_devices()],
-    })
+    print(
+        f"overall: {format_scores(overall | {'segment_lengths_m': list(lengths)})}  {fps:.0f} frames/s on {len(jax.local_devices())} device(s)"
+    )
+    write_json_atomic(
+        args.out / "metrics.json",
+        {
+            "overall": overall,
+            "per_sequence": per_sequence,
+            "segment_lengths_m": list(lengths),
+            "checkpoint": str(args.checkpoint) if args.checkpoint else None,
+            "attitude": args.attitude,
+            "bands": model.bands is not None,
+            "warm_start": args.warm_start,
+            "devices": [str(d) for d in jax.local_devices()],
+        },
+    )
     print(f"wrote {args.out}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command with ``argv`` (default: the process's arguments); returns the exit code."""
     return common.run(build_parser(), evaluate, argv)
 
 

@@ -37,12 +37,12 @@ import numpy as np
 
 from jbevo.cli import common
 from jbevo.data import sequence as sq
+from jbevo.data.pose_files import write_kitti
 from jbevo.data.splits import PARTS
 from jbevo.data.synthetic.conditions import CONDITIONS
 from jbevo.data.synthetic.scenes import SCENE_KINDS, scene
 from jbevo.data.synthetic.world import TOWNS, World
 from jbevo.eval.plots import trajectory_top_view
-from jbevo.eval.pose_files import write_kitti
 from jbevo.eval.scores import pose_errors
 from jbevo.files import write_json_atomic
 from jbevo.models.baselines import map_matching_alone
@@ -59,14 +59,17 @@ FILE_TAGS = {"BEVO+": "bevo_plus", "BEVO odometry": "odometry", "map matching al
 
 
 def _print(label: str, m: dict) -> None:
-    print(f"{label}: mean {m['mean_position_error_m']:.3f} m  max {m['max_position_error_m']:.3f} m  "
-          f"yaw {m['mean_yaw_error_deg']:.3f} deg  final {m['final_position_error_m']:.3f} m over {m['distance_m']:.0f} m")
+    print(
+        f"{label}: mean {m['mean_position_error_m']:.3f} m  max {m['max_position_error_m']:.3f} m  "
+        f"yaw {m['mean_yaw_error_deg']:.3f} deg  final {m['final_position_error_m']:.3f} m over {m['distance_m']:.0f} m"
+    )
 
 
 # ----------------------------------------------------------------------------- train
 
 
 def train(args: argparse.Namespace) -> int:
+    """Train BEVO+ end to end on a scene's first two quarters, validating on the third."""
     t_start = time.perf_counter()
     world = World.create(args.town)
     frames = args.frames or None
@@ -75,9 +78,12 @@ def train(args: argparse.Namespace) -> int:
         val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames)
     with common.reading(f"the run in {args.out}"):
         model, params, static, optimizer, opt_state, progress_ = start_run(
-            localization_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m")
-    print(f"BEVO+: {model.num_learnable()} learnable parameters; {args.kind} scene in {args.town} ({args.condition}): "
-          f"{train_scene.sequence.num_frames} training and {val_scene.sequence.num_frames} validation frames")
+            localization_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m"
+        )
+    print(
+        f"BEVO+: {model.num_learnable()} learnable parameters; {args.kind} scene in {args.town} ({args.condition}): "
+        f"{train_scene.sequence.num_frames} training and {val_scene.sequence.num_frames} validation frames"
+    )
     before = validate_localization(localization_model(args.kind), val_scene.sequence, val_scene.map)
     _print("validation before training (hand-set)", before)
 
@@ -95,26 +101,40 @@ def train(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed + progress_["epoch"])
     for epoch in range(progress_["epoch"], args.epochs):
         try:
-            params, opt_state, mean_loss, steps = run_epoch(step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}")
+            params, opt_state, mean_loss, steps = run_epoch(
+                step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}"
+            )
         except TrainingDiverged as error:
             raise common.CommandError(str(error)) from None
         model = eqx.combine(params, static)
         val = validate_localization(model, val_scene.sequence, val_scene.map)
         progress_["epoch"], progress_["step"] = epoch + 1, progress_["step"] + steps
         progress_["history"].append({"epoch": epoch + 1, "loss": mean_loss, **{f"val_{k}": v for k, v in val.items()}})
-        print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  val mean {val['mean_position_error_m']:.3f} m  "
-              f"max {val['max_position_error_m']:.3f} m  yaw {val['mean_yaw_error_deg']:.3f} deg")
+        print(
+            f"epoch {epoch + 1}: loss {mean_loss:.5f}  val mean {val['mean_position_error_m']:.3f} m  "
+            f"max {val['max_position_error_m']:.3f} m  yaw {val['mean_yaw_error_deg']:.3f} deg"
+        )
         save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", val["mean_position_error_m"])
 
     with common.reading(f"{args.out / 'best.ckpt'}"):
         best_model = checkpoint.load(args.out / "best.ckpt")[0] if (args.out / "best.ckpt").is_file() else model
     after = validate_localization(best_model, val_scene.sequence, val_scene.map)
     _print("validation after training (best checkpoint)", after)
-    write_json_atomic(args.out / "metrics.json", {
-        "kind": args.kind, "town": args.town, "condition": args.condition, "before": before, "after": after,
-        "learnable_parameters": model.num_learnable(), "epochs": progress_["epoch"], "history": progress_["history"],
-        "seconds": time.perf_counter() - t_start, "args": common.json_args(args),
-    })
+    write_json_atomic(
+        args.out / "metrics.json",
+        {
+            "kind": args.kind,
+            "town": args.town,
+            "condition": args.condition,
+            "before": before,
+            "after": after,
+            "learnable_parameters": model.num_learnable(),
+            "epochs": progress_["epoch"],
+            "history": progress_["history"],
+            "seconds": time.perf_counter() - t_start,
+            "args": common.json_args(args),
+        },
+    )
     print(f"wrote {args.out / 'metrics.json'} ({time.perf_counter() - t_start:.0f} s)")
     return 0
 
@@ -129,7 +149,10 @@ def evaluate(args: argparse.Namespace) -> dict:
     world = World.create(args.town)
     frames = args.frames or None
     with common.reading("the scene"):
-        scenes = [scene(args.kind, args.town, c, args.part, args.seed, world, frames) for c in progress(args.conditions, "rendering scenes")]
+        scenes = [
+            scene(args.kind, args.town, c, args.part, args.seed, world, frames)
+            for c in progress(args.conditions, "rendering scenes")
+        ]
     batch = sq.stack([s.sequence for s in scenes])
     map_ = scenes[0].map  # the conditions share the drive, hence the map
     jax.block_until_ready(run_bevo_plus_batch(model, batch, map_, True))
@@ -142,10 +165,16 @@ def evaluate(args: argparse.Namespace) -> dict:
     results = {}
     for i, sc in enumerate(progress(scenes, "writing poses and plots")):
         truth = np.asarray(sc.sequence.planar)
-        estimates = {"BEVO+": np.asarray(out.poses[i]), "BEVO odometry": np.asarray(odometry[i]), "map matching alone": np.asarray(map_only[i])}
+        estimates = {
+            "BEVO+": np.asarray(out.poses[i]),
+            "BEVO odometry": np.asarray(odometry[i]),
+            "map matching alone": np.asarray(map_only[i]),
+        }
         entry = {name: pose_errors(est, truth) for name, est in estimates.items()}
         entry["BEVO+"]["accepted"] = float(np.mean(np.asarray(out.accepted[i])))
-        entry["final_error_ratio_odometry_to_bevo_plus"] = entry["BEVO odometry"]["final_position_error_m"] / max(entry["BEVO+"]["final_position_error_m"], 1e-9)
+        entry["final_error_ratio_odometry_to_bevo_plus"] = entry["BEVO odometry"]["final_position_error_m"] / max(
+            entry["BEVO+"]["final_position_error_m"], 1e-9
+        )
         results[sc.name] = entry
         write_kitti(args.out / "poses" / f"{sc.name}_gt.txt", truth)
         for name, est in estimates.items():
@@ -153,8 +182,14 @@ def evaluate(args: argparse.Namespace) -> dict:
         trajectory_top_view(args.out / "plots" / f"{sc.name}.png", truth, estimates, title=sc.name)
         for name in estimates:
             _print(f"{sc.name} {name}", entry[name])
-    summary = {"scenes": results, "frames_per_s": fps, "checkpoint": str(args.checkpoint) if args.checkpoint else None,
-               "kind": args.kind, "town": args.town, "part": args.part}
+    summary = {
+        "scenes": results,
+        "frames_per_s": fps,
+        "checkpoint": str(args.checkpoint) if args.checkpoint else None,
+        "kind": args.kind,
+        "town": args.town,
+        "part": args.part,
+    }
     write_json_atomic(args.out / "metrics.json", summary)
     print(f"BEVO+ at {fps:.0f} frames/s; wrote {args.out}")
     return summary
@@ -164,19 +199,27 @@ def evaluate(args: argparse.Namespace) -> dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser."""
     p = common.parser("python -m jbevo.localize", __doc__)
     sub = p.add_subparsers(dest="command", required=True)
     scene_options = argparse.ArgumentParser(add_help=False)
     scene_options.add_argument("--kind", choices=sorted(SCENE_KINDS), default="carla", help="scene kind (platform and map)")
-    scene_options.add_argument("--frames", type=common.non_negative_int, default=0, help="frames of the whole drive (0: the kind's default)")
+    scene_options.add_argument(
+        "--frames", type=common.non_negative_int, default=0, help="frames of the whole drive (0: the kind's default)"
+    )
     seed = common.seed_option(0, "the drive")
-    t = sub.add_parser("train", parents=[scene_options, seed, common.optimizer_options(lr=0.02, epochs=3, window=64, batch=4)],
-                       help="learn BEVO+ end to end")
+    t = sub.add_parser(
+        "train",
+        parents=[scene_options, seed, common.optimizer_options(lr=0.02, epochs=3, window=64, batch=4)],
+        help="learn BEVO+ end to end",
+    )
     t.add_argument("--town", choices=sorted(TOWNS), default="town01")
     t.add_argument("--condition", choices=sorted(CONDITIONS), default="day")
     t.add_argument("--out", type=Path, default=Path("runs/localize"))
     t.set_defaults(func=train)
-    e = sub.add_parser("evaluate", parents=[scene_options, seed], help="localize the test quarter; compare with odometry and map matching alone")
+    e = sub.add_parser(
+        "evaluate", parents=[scene_options, seed], help="localize the test quarter; compare with odometry and map matching alone"
+    )
     e.add_argument("--checkpoint", type=Path, help="a checkpoint file or a training output folder (its best.ckpt)")
     e.add_argument("--town", choices=sorted(TOWNS), default="town02")
     e.add_argument("--conditions", nargs="+", choices=sorted(CONDITIONS), default=["day", "night", "dynamic"])
@@ -187,6 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command with ``argv`` (default: the process's arguments); returns the exit code."""
     return common.run(build_parser(), lambda args: args.func(args), argv)
 
 

@@ -17,19 +17,30 @@ import jax
 import jax.numpy as jnp
 
 from jbevo.cli import common
+from jbevo.data.pose_files import match_frames, read_poses
 from jbevo.eval import plots
-from jbevo.eval.pose_files import match_frames, read_poses
 from jbevo.eval.trajectory_metrics import evaluate, summary
 from jbevo.files import write_json_atomic
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The command's argument parser."""
     p = common.parser("python -m jbevo.metrics", __doc__)
     p.add_argument("--gt", type=Path, required=True, help="ground-truth poses (KITTI 12/13 columns or TUM)")
     p.add_argument("--est", type=Path, required=True, help="estimated poses (same formats)")
-    p.add_argument("--align", choices=["sim3", "se3", "4dof", "se2", "none"], default="none",
-                   help="alignment of the estimate before the metrics (se2 = 4dof about the gravity axis)")
-    p.add_argument("--up-axis", type=int, choices=(0, 1, 2), default=1, help="gravity axis for 4dof/se2: 1 = KITTI camera y (default), 2 = z-up")
+    p.add_argument(
+        "--align",
+        choices=["sim3", "se3", "4dof", "se2", "none"],
+        default="none",
+        help="alignment of the estimate before the metrics (se2 = 4dof about the gravity axis)",
+    )
+    p.add_argument(
+        "--up-axis",
+        type=int,
+        choices=(0, 1, 2),
+        default=1,
+        help="gravity axis for 4dof/se2: 1 = KITTI camera y (default), 2 = z-up",
+    )
     p.add_argument("--rpe-delta", type=common.positive_float, default=1.0)
     p.add_argument("--rpe-unit", choices=["frames", "m"], default="frames")
     p.add_argument("--json", type=Path, help="write the numbers to this JSON file")
@@ -38,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def metrics(args: argparse.Namespace) -> int:
+    """Score one estimated trajectory against its ground truth."""
     with common.reading("the pose files"):
         gt, est, valid = match_frames(read_poses(args.gt), read_poses(args.est))
     if args.rpe_unit == "frames" and args.rpe_delta != int(args.rpe_delta):
@@ -54,8 +66,7 @@ def metrics(args: argparse.Namespace) -> int:
         print("t_err  none: no segment of 100 m or more in this drive")
         print("r_err  none")
     print(f"ATE    {numbers['ate_m']:.6f} m   (alignment: {args.align})")
-    print(f"RPE    {numbers['rpe_trans_m']:.6f} m, {numbers['rpe_rot_deg']:.6f} deg   "
-          f"(delta {args.rpe_delta:g} {args.rpe_unit})")
+    print(f"RPE    {numbers['rpe_trans_m']:.6f} m, {numbers['rpe_rot_deg']:.6f} deg   (delta {args.rpe_delta:g} {args.rpe_unit})")
     if args.json:
         write_json_atomic(args.json, numbers)
     if args.plot:
@@ -66,6 +77,7 @@ def metrics(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command with ``argv`` (default: the process's arguments); returns the exit code."""
     return common.run(build_parser(), metrics, argv)
 
 

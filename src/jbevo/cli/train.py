@@ -33,13 +33,13 @@ from jbevo.data.catalog import load_sequences
 from jbevo.data.sequence import Sequence
 from jbevo.eval.scores import SHORT_SEGMENTS, criterion, format_scores, segment_lengths
 from jbevo.files import write_json_atomic
+from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.losses import motion_loss
 from jbevo.training import checkpoint
 from jbevo.training.loop import TrainingDiverged, make_step, run_epoch, save_epoch, start_run
 from jbevo.training.validation import validate
 from jbevo.training.windows import training_windows
-from jbevo.geometry.bev_grid import BevGrid
 
 DEFAULT_GRID = BevGrid(0.1, (128, 128), near=7.5)
 
@@ -52,7 +52,9 @@ def load_datasets(args: argparse.Namespace) -> tuple[list[Sequence], list[Sequen
         train_names, val_names = seeds[:-n_val], seeds[-n_val:]
     else:
         train_names, val_names = args.train, args.val
-    options = dict(frames=args.frames, kitti_poses=args.kitti_poses, kitti_root=args.kitti_root, camera=args.camera, town=args.town)
+    options = dict(
+        frames=args.frames, kitti_poses=args.kitti_poses, kitti_root=args.kitti_root, camera=args.camera, town=args.town
+    )
     with common.reading(f"the {args.dataset} dataset"):
         train = load_sequences(args.dataset, train_names, seed=args.seed, **options)
         val = load_sequences(args.dataset, val_names, seed=args.seed + 100, **options)
@@ -60,21 +62,39 @@ def load_datasets(args: argparse.Namespace) -> tuple[list[Sequence], list[Sequen
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = common.parser("python -m jbevo.train", __doc__, [
-        common.dataset_options(default_frames=120), common.grid_option(DEFAULT_GRID),
-        common.optimizer_options(lr=0.03, epochs=8, window=32, batch=4), common.seed_option(),
-    ])
+    """The command's argument parser."""
+    p = common.parser(
+        "python -m jbevo.train",
+        __doc__,
+        [
+            common.dataset_options(default_frames=120),
+            common.grid_option(DEFAULT_GRID),
+            common.optimizer_options(lr=0.03, epochs=8, window=32, batch=4),
+            common.seed_option(),
+        ],
+    )
     p.add_argument("--train", nargs="+", default=list(splits.KITTI_TRAIN), help="training sequence names (KITTI datasets)")
     p.add_argument("--val", nargs="+", default=list(splits.KITTI_TEST), help="validation sequence names (KITTI datasets)")
-    p.add_argument("--sequences", type=common.positive_int, default=5, help="number of built-in synthetic drives (one fifth validate)")
-    p.add_argument("--val-window", type=common.non_negative_int, default=40,
-                   help="validate on windows of this many frames, warm-started like training (0: whole sequences, cold start)")
-    p.add_argument("--bands", action="store_true", help="refine each frame with the BEV's near and far bands (jbevo.vision.bands; KITTI-size images)")
+    p.add_argument(
+        "--sequences", type=common.positive_int, default=5, help="number of built-in synthetic drives (one fifth validate)"
+    )
+    p.add_argument(
+        "--val-window",
+        type=common.non_negative_int,
+        default=40,
+        help="validate on windows of this many frames, warm-started like training (0: whole sequences, cold start)",
+    )
+    p.add_argument(
+        "--bands",
+        action="store_true",
+        help="refine each frame with the BEV's near and far bands (jbevo.vision.bands; KITTI-size images)",
+    )
     p.add_argument("--out", type=Path, default=Path("runs/bevo"))
     return p
 
 
 def train(args: argparse.Namespace) -> int:
+    """Train BEVO and write the checkpoints and the validation metrics."""
     t_start = time.perf_counter()
     if args.dataset == "synthetic" and args.sequences < 2:
         raise common.CommandError("the synthetic dataset needs --sequences >= 2 (one fifth, at least one, validates)")
@@ -84,10 +104,13 @@ def train(args: argparse.Namespace) -> int:
     imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
     with common.reading(f"the run in {args.out}"):
         model, params, static, optimizer, opt_state, progress = start_run(
-            Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct")
+            Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
+        )
         windows = training_windows(train_seqs, args.window)
-    print(f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
-          f"({args.dataset}); segment lengths {list(lengths)} m")
+    print(
+        f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
+        f"({args.dataset}); segment lengths {list(lengths)} m"
+    )
 
     hand_set = Bevo.create(model.grid, imu_dt, bands=model.bands is not None)
     before = validate(hand_set, val_seqs, lengths, args.val_window)
@@ -103,13 +126,17 @@ def train(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed + progress["epoch"])
     for epoch in range(progress["epoch"], args.epochs):
         try:
-            params, opt_state, mean_loss, steps = run_epoch(step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}")
+            params, opt_state, mean_loss, steps = run_epoch(
+                step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}"
+            )
         except TrainingDiverged as error:
             raise common.CommandError(str(error)) from None
         model = eqx.combine(params, static)
         val = validate(model, val_seqs, lengths, args.val_window)
         progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
-        progress["history"].append({"epoch": epoch + 1, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]})
+        progress["history"].append(
+            {"epoch": epoch + 1, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]}
+        )
         print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  validation {format_scores(val)}")
         save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion(val))
 
@@ -122,17 +149,29 @@ def train(args: argparse.Namespace) -> int:
         whole = {"hand_set": validate(hand_set, val_seqs, lengths), "learned": validate(best, val_seqs, lengths)}
         print(f"whole validation sequences from a cold start, hand-set: {format_scores(whole['hand_set'])}")
         print(f"whole validation sequences from a cold start, learned:  {format_scores(whole['learned'])}")
-    write_json_atomic(args.out / "metrics.json", {
-        "dataset": args.dataset, "validation": f"windows of {args.val_window} frames, warm start" if args.val_window else "whole sequences, cold start",
-        "before": before, "after": after, "whole_sequences": whole, "learnable_parameters": model.num_learnable(),
-        "epochs": progress["epoch"], "history": progress["history"], "seconds": time.perf_counter() - t_start,
-        "args": common.json_args(args),
-    })
+    write_json_atomic(
+        args.out / "metrics.json",
+        {
+            "dataset": args.dataset,
+            "validation": f"windows of {args.val_window} frames, warm start"
+            if args.val_window
+            else "whole sequences, cold start",
+            "before": before,
+            "after": after,
+            "whole_sequences": whole,
+            "learnable_parameters": model.num_learnable(),
+            "epochs": progress["epoch"],
+            "history": progress["history"],
+            "seconds": time.perf_counter() - t_start,
+            "args": common.json_args(args),
+        },
+    )
     print(f"wrote {args.out / 'metrics.json'} ({time.perf_counter() - t_start:.0f} s)")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command with ``argv`` (default: the process's arguments); returns the exit code."""
     return common.run(build_parser(), train, argv)
 
 

@@ -33,7 +33,7 @@ def load_sequences(
     if dataset == "kitti-synthetic":
         if kitti_poses is None:
             raise ValueError("the kitti-synthetic dataset needs kitti_poses, the folder of KITTI pose files NN.txt")
-        from jbevo.eval.pose_files import read_kitti
+        from jbevo.data.pose_files import read_kitti
 
         world = World.create(town)
         cam = small_camera() if camera == "small" else Camera.kitti()
@@ -53,3 +53,6 @@ def load_sequences(
 
         return [read_odometry(kitti_root, n) for n in names]
     raise ValueError(f"unknown dataset {dataset!r}; known: {DATASETS}")
+
+
+__all__ = ["DATASETS", "load_sequences"]

@@ -33,8 +33,8 @@ import numpy as np
 from jbevo.data.kitti_frames import CAMERA_HEIGHT, body_poses_from_kitti, camera_poses_from_body
 from jbevo.data.sequence import Sequence, check
 from jbevo.files import write_atomic, write_text_atomic
-from jbevo.geometry.euler import rotation_zyx
 from jbevo.geometry.camera import Camera
+from jbevo.geometry.euler import rotation_zyx
 
 EARTH_RADIUS = 6378137.0
 _EPOCH = datetime(2011, 9, 26, 13, 0, 0)
@@ -81,7 +81,17 @@ def _camera(p: np.ndarray, shape, height: float) -> Camera:
 
 
 def _sequence(images, frame_times, imu_times, gyro, accel, camera, poses) -> Sequence:
-    return check(Sequence(*(jnp.asarray(a) for a in (images, frame_times, imu_times, gyro, accel)), camera, jnp.asarray(poses, jnp.float32)))
+    return check(
+        Sequence(
+            images=jnp.asarray(images),
+            frame_times=jnp.asarray(frame_times),
+            imu_times=jnp.asarray(imu_times),
+            gyro=jnp.asarray(gyro),
+            accel=jnp.asarray(accel),
+            camera=camera,
+            poses=jnp.asarray(poses, jnp.float32),
+        )
+    )
 
 
 def read_odometry(root: str | Path, sequence: str, camera_height: float = CAMERA_HEIGHT) -> Sequence:
@@ -113,7 +123,15 @@ def read_odometry(root: str | Path, sequence: str, camera_height: float = CAMERA
     else:
         poses = np.full((n, 4, 4), np.nan)
     nan = np.full((n, 1, 3), np.nan, np.float32)
-    return _sequence(images, times.astype(np.float32), times[:, None].astype(np.float32), nan, nan, _camera(p0, images.shape[1:], camera_height), poses)
+    return _sequence(
+        images,
+        times.astype(np.float32),
+        times[:, None].astype(np.float32),
+        nan,
+        nan,
+        _camera(p0, images.shape[1:], camera_height),
+        poses,
+    )
 
 
 def write_odometry(seq: Sequence, root: str | Path, sequence: str) -> None:
@@ -132,7 +150,9 @@ def write_odometry(seq: Sequence, root: str | Path, sequence: str) -> None:
     poses = np.asarray(seq.poses, float)
     if np.all(np.isfinite(poses)):
         cam = camera_poses_from_body(poses)
-        write_text_atomic(root / "poses" / f"{sequence}.txt", "".join(" ".join(f"{v:.12e}" for v in c[:3].ravel()) + "\n" for c in cam))
+        write_text_atomic(
+            root / "poses" / f"{sequence}.txt", "".join(" ".join(f"{v:.12e}" for v in c[:3].ravel()) + "\n" for c in cam)
+        )
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
@@ -197,7 +217,11 @@ def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT) -> 
         raise ValueError(f"{drive / 'oxts'}: {len(files)} records but {len(oxts_times)} timestamps")
     oxts = np.stack([_numbers(f, 30)[0] for f in files])
     calib_file = drive.parent / "calib_cam_to_cam.txt"
-    rows = {k.strip(): v for k, _, v in (line.partition(":") for line in calib_file.read_text().splitlines())} if calib_file.is_file() else {}
+    rows = (
+        {k.strip(): v for k, _, v in (line.partition(":") for line in calib_file.read_text().splitlines())}
+        if calib_file.is_file()
+        else {}
+    )
     if "P_rect_00" not in rows:
         raise ValueError(f"{calib_file} is missing or has no P_rect_00 line")
     p = np.array([float(v) for v in rows["P_rect_00"].split()]).reshape(3, 4)
@@ -219,8 +243,13 @@ def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT) -> 
     poses = oxts_poses(oxts)[nearest]
     poses = np.linalg.inv(poses[0]) @ poses
     return _sequence(
-        images, frame_times.astype(np.float32), imu_times.astype(np.float32), gyro.astype(np.float32),
-        accel.astype(np.float32), _camera(p, images.shape[1:], camera_height), poses,
+        images,
+        frame_times.astype(np.float32),
+        imu_times.astype(np.float32),
+        gyro.astype(np.float32),
+        accel.astype(np.float32),
+        _camera(p, images.shape[1:], camera_height),
+        poses,
     )
 
 
@@ -243,7 +272,11 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
     lon = np.degrees((x0 + poses[:, 0, 3]) / (scale * EARTH_RADIUS))
     lat = np.degrees(2 * np.arctan(np.exp((y0 + poses[:, 1, 3]) / (scale * EARTH_RADIUS)))) - 90.0
     r = poses[:, :3, :3]
-    yaw, pitch, roll = np.arctan2(r[:, 1, 0], r[:, 0, 0]), -np.arcsin(np.clip(r[:, 2, 0], -1, 1)), np.arctan2(r[:, 2, 1], r[:, 2, 2])
+    yaw, pitch, roll = (
+        np.arctan2(r[:, 1, 0], r[:, 0, 0]),
+        -np.arcsin(np.clip(r[:, 2, 0], -1, 1)),
+        np.arctan2(r[:, 2, 1], r[:, 2, 2]),
+    )
     gyro, accel = np.asarray(seq.gyro, float)[:, -1], np.asarray(seq.accel, float)[:, -1]
     for i in range(len(times)):
         record = np.zeros(30)
@@ -252,3 +285,6 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
         write_text_atomic(drive / "oxts" / "data" / f"{i:010d}.txt", " ".join(f"{v:.15g}" for v in record) + "\n")
     p = np.concatenate([np.asarray(seq.camera.intrinsics, float), np.zeros((3, 1))], 1)
     write_text_atomic(drive.parent / "calib_cam_to_cam.txt", "P_rect_00: " + " ".join(f"{v:.12e}" for v in p.ravel()) + "\n")
+
+
+__all__ = ["EARTH_RADIUS", "oxts_poses", "read_odometry", "read_raw", "write_odometry", "write_raw"]

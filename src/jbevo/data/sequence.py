@@ -104,9 +104,7 @@ def stack(seqs: list[Sequence]) -> Sequence:
         if jax.tree_util.tree_structure(q) != structure:
             raise ValueError(f"sequence {i} differs from sequence 0 in camera image size or layout")
         if q.frame_times.shape != seqs[0].frame_times.shape or q.imu_times.shape != seqs[0].imu_times.shape:
-            raise ValueError(
-                f"sequence {i} has {q.imu_times.shape} frames x IMU samples, sequence 0 {seqs[0].imu_times.shape}"
-            )
+            raise ValueError(f"sequence {i} has {q.imu_times.shape} frames x IMU samples, sequence 0 {seqs[0].imu_times.shape}")
     return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *seqs)
 
 

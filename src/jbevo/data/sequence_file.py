@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -13,7 +14,6 @@ import numpy as np
 from jbevo.data.sequence import Sequence, check
 from jbevo.files import write_atomic
 from jbevo.geometry.camera import Camera
-
 
 _FIELDS = ("images", "frame_times", "imu_times", "gyro", "accel", "poses")
 
@@ -24,7 +24,7 @@ def save(seq: Sequence, path: str | Path) -> None:
         raise ValueError(f"save writes one sequence; got a batch of shape {seq.frame_times.shape[:-1]}")
     check(seq)
     k = np.asarray(seq.camera.intrinsics)
-    arrays = {name: np.asarray(getattr(seq, name)) for name in _FIELDS}
+    arrays: dict[str, Any] = {name: np.asarray(getattr(seq, name)) for name in _FIELDS}
     arrays |= {
         "intrinsics": k,
         "camera_height": np.asarray(seq.camera.height),
@@ -42,7 +42,7 @@ def load(path: str | Path) -> Sequence:
     if not path.is_file():
         raise FileNotFoundError(f"no sequence file at {path}")
     try:
-        with np.load(path) as data:
+        with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in (*_FIELDS, "intrinsics", "camera_height", "rotation_body_to_camera")}
     except (zipfile.BadZipFile, EOFError, OSError, ValueError) as error:
         raise ValueError(f"{path} is not a readable sequence file ({error})") from error
@@ -52,10 +52,15 @@ def load(path: str | Path) -> Sequence:
     if k.shape != (3, 3) or arrays["images"].ndim != 3:
         raise ValueError(f"{path}: intrinsics {k.shape} / images {arrays['images'].shape} are not one sequence's")
     camera = Camera(
-        k[0, 0], k[1, 1], k[0, 2], k[1, 2], arrays["images"].shape[-2:], float(arrays["camera_height"]),
+        k[0, 0],
+        k[1, 1],
+        k[0, 2],
+        k[1, 2],
+        arrays["images"].shape[-2:],
+        float(arrays["camera_height"]),
         arrays["rotation_body_to_camera"],
     )
-    seq = Sequence(*(jnp.asarray(arrays[name]) for name in _FIELDS[:5]), camera, jnp.asarray(arrays["poses"]))
+    seq = Sequence(camera=camera, **{name: jnp.asarray(arrays[name]) for name in _FIELDS})
     return check(seq)
 
 

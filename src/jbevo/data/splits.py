@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from jbevo.data.sequence import Sequence, window
 
-
 KITTI_TRAIN = ("00", "01", "02", "03", "04", "05", "06", "07", "08")
 
 

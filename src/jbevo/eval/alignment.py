@@ -9,7 +9,6 @@ from typing import NamedTuple
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
-
 ALIGNMENTS = ("none", "se3", "sim3", "4dof")
 
 

@@ -20,7 +20,6 @@ from jaxtyping import Array, Bool, Float
 
 from jbevo.geometry.se3 import general_inverse, rotation_angle, translation_norm
 
-
 SEGMENT_LENGTHS = (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0)
 
 
@@ -107,4 +106,12 @@ def kitti_errors(segments: list[SegmentErrors] | SegmentErrors) -> KittiErrors:
     )
 
 
-__all__ = ["SEGMENT_LENGTHS", "SEGMENT_STEP", "KittiErrors", "SegmentErrors", "kitti_errors", "kitti_segment_errors", "trajectory_distances"]
+__all__ = [
+    "SEGMENT_LENGTHS",
+    "SEGMENT_STEP",
+    "KittiErrors",
+    "SegmentErrors",
+    "kitti_errors",
+    "kitti_segment_errors",
+    "trajectory_distances",
+]

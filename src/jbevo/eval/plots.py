@@ -1,4 +1,5 @@
-"""Trajectory and error figures (matplotlib, Agg backend), written atomically as PNG.
+"""Trajectory and error figures (matplotlib's object-oriented API, no pyplot: importing this module
+changes no global backend), written atomically as PNG.
 
 * :func:`trajectory_top_view`: ground truth and one or more estimates seen from above.
 * :func:`segment_errors`: KITTI translation and rotation error per segment length, per method.
@@ -13,23 +14,26 @@ import io
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from jbevo.files import write_atomic  # noqa: E402
+from jbevo.files import write_atomic
 
 _AXIS = "xyz"
 
 
-def _save(fig, path: Path | None):
+def _figure(size: tuple[float, float], columns: int = 1) -> tuple[Figure, list]:
+    fig = Figure(figsize=size)
+    FigureCanvasAgg(fig)
+    return fig, [fig.add_subplot(1, columns, i + 1) for i in range(columns)]
+
+
+def _save(fig: Figure, path: str | Path | None) -> Figure:
     if path is not None:
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=120, bbox_inches="tight")
         write_atomic(Path(path), lambda f: f.write(buf.getvalue()), mode="wb")
-    plt.close(fig)
     return fig
 
 
@@ -43,7 +47,7 @@ def _positions(traj) -> np.ndarray:
 
 
 def trajectory_top_view(
-    path: Path | None,
+    path: str | Path | None,
     gt,
     estimates: Mapping[str, object],
     plane: tuple[int, int] = (0, 1),
@@ -51,7 +55,7 @@ def trajectory_top_view(
 ):
     """Top view of ``gt`` and each named estimate on the axes ``plane`` (``(0, 2)``: KITTI camera
     x and z; ``(0, 1)``: a z-up world or planar trajectories). The start is marked."""
-    fig, ax = plt.subplots(figsize=(6, 6))
+    fig, (ax,) = _figure((6, 6))
     g = _positions(gt)
     ax.plot(g[:, plane[0]], g[:, plane[1]], "k-", lw=2, label="ground truth")
     for name, est in estimates.items():
@@ -69,13 +73,13 @@ def trajectory_top_view(
 
 
 def segment_errors(
-    path: Path | None,
+    path: str | Path | None,
     lengths: Sequence[float],
     t_err_pct: Mapping[str, Sequence[float]],
     r_err_deg_per_100m: Mapping[str, Sequence[float]],
 ):
     """KITTI errors per segment length: translation (%) and rotation (deg / 100 m), per method."""
-    fig, (at, ar) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (at, ar) = _figure((10, 4), 2)
     for name, values in t_err_pct.items():
         at.plot(lengths, values, "o-", label=name)
     for name, values in r_err_deg_per_100m.items():
@@ -89,9 +93,9 @@ def segment_errors(
     return _save(fig, path)
 
 
-def error_over_time(path: Path | None, time_s, errors: Mapping[str, object], ylabel: str = "error"):
+def error_over_time(path: str | Path | None, time_s, errors: Mapping[str, object], ylabel: str = "error"):
     """Per-frame error curves against time (or frame index)."""
-    fig, ax = plt.subplots(figsize=(8, 3.5))
+    fig, (ax,) = _figure((8, 3.5))
     for name, values in errors.items():
         ax.plot(np.asarray(time_s), np.asarray(values), lw=1, label=name)
     ax.set_xlabel("time [s]")
@@ -99,3 +103,6 @@ def error_over_time(path: Path | None, time_s, errors: Mapping[str, object], yla
     ax.grid(alpha=0.3)
     ax.legend()
     return _save(fig, path)
+
+
+__all__ = ["error_over_time", "segment_errors", "trajectory_top_view"]

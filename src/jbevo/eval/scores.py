@@ -13,7 +13,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import ArrayLike, Float
 
 from jbevo.data.sequence import Sequence
 from jbevo.eval import devkit
@@ -32,12 +32,16 @@ def segment_lengths(dataset: str, frames: int) -> tuple[float, ...]:
     return SHORT_SEGMENTS if short else devkit.SEGMENT_LENGTHS
 
 
-def segment_errors(poses: Float[Array, "T 3"], planar: Float[Array, "T 3"], lengths: tuple[float, ...]) -> devkit.SegmentErrors:
+def segment_errors(
+    poses: Float[ArrayLike, "T 3"], planar: Float[ArrayLike, "T 3"], lengths: tuple[float, ...]
+) -> devkit.SegmentErrors:
     """Devkit segment errors of one planar estimate against its planar truth (both lifted to
     z = 0), starting every frame for short segments and every 10 frames (the devkit's step) for
     the devkit's lengths."""
     step = 1 if lengths[0] < 100 else 10
-    return devkit.kitti_segment_errors(planar_to_se3(planar), planar_to_se3(poses), lengths=lengths, step=step)
+    return devkit.kitti_segment_errors(
+        planar_to_se3(jnp.asarray(planar)), planar_to_se3(jnp.asarray(poses)), lengths=lengths, step=step
+    )
 
 
 def _unbatch(outputs, seqs) -> tuple[list, list]:
@@ -46,7 +50,7 @@ def _unbatch(outputs, seqs) -> tuple[list, list]:
         if seqs.frame_times.ndim == 1:
             return [outputs], [seqs]
         count = seqs.frame_times.shape[0]
-        take = lambda tree, i: jax.tree_util.tree_map(lambda x: x[i], tree)  # noqa: E731
+        take = lambda tree, i: jax.tree_util.tree_map(lambda x: x[i], tree)
         return [take(outputs, i) for i in range(count)], [take(seqs, i) for i in range(count)]
     return list(outputs), list(seqs)
 
@@ -101,8 +105,10 @@ def format_scores(scores: dict) -> str:
         kitti = f"t_err {scores['t_err_pct']:.3f} %  r_err {scores['r_err_deg_per_100m']:.3f} deg/100m"
     else:
         kitti = f"no segment of {scores['segment_lengths_m'][0]:g} m or more"
-    return (f"{kitti}  ATE {scores['ate_m']:.3f} m  per-frame motion {100 * scores['motion_rmse_m']:.2f} cm, "
-            f"yaw {scores['yaw_rmse_deg']:.3f} deg")
+    return (
+        f"{kitti}  ATE {scores['ate_m']:.3f} m  per-frame motion {100 * scores['motion_rmse_m']:.2f} cm, "
+        f"yaw {scores['yaw_rmse_deg']:.3f} deg"
+    )
 
 
 def pose_errors(poses, truth) -> dict:
@@ -111,8 +117,10 @@ def pose_errors(poses, truth) -> dict:
     pos = np.hypot(*(poses[:, :2] - truth[:, :2]).T)
     yaw = np.abs(np.degrees(np.angle(np.exp(1j * (poses[:, 2] - truth[:, 2])))))
     return {
-        "mean_position_error_m": float(pos.mean()), "max_position_error_m": float(pos.max()),
-        "final_position_error_m": float(pos[-1]), "mean_yaw_error_deg": float(yaw.mean()),
+        "mean_position_error_m": float(pos.mean()),
+        "max_position_error_m": float(pos.max()),
+        "final_position_error_m": float(pos[-1]),
+        "mean_yaw_error_deg": float(yaw.mean()),
         "distance_m": float(np.sum(np.hypot(*np.diff(truth[:, :2], axis=0).T))),
     }
 

@@ -33,7 +33,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from jbevo.eval.alignment import align, apply_alignment
-from jbevo.eval.devkit import SEGMENT_LENGTHS, KittiErrors, SegmentErrors, kitti_errors, kitti_segment_errors, trajectory_distances
+from jbevo.eval.devkit import (
+    SEGMENT_LENGTHS,
+    KittiErrors,
+    SegmentErrors,
+    kitti_errors,
+    kitti_segment_errors,
+    trajectory_distances,
+)
 from jbevo.geometry.se3 import general_inverse, relative_to_first, rotation_angle, translation_norm
 
 
@@ -157,6 +164,7 @@ def evaluate_batch(
 def summary(ev: Evaluation) -> dict:
     """The headline numbers as plain floats (the keys of ``python -m jbevo.metrics --json``);
     ``None`` for the devkit errors where the drive holds no segment (of any, or of that length)."""
+
     def value(v, count):
         return float(v) if int(count) else None
 
@@ -169,7 +177,8 @@ def summary(ev: Evaluation) -> dict:
         "rpe_rot_deg": float(ev.rpe.rot_deg),
         "segments": int(kitti.segments),
         "t_err_pct_by_length": {
-            f"{int(length)}": value(v, n) for length, v, n in zip(SEGMENT_LENGTHS, kitti.t_err_pct_by_length, kitti.segments_by_length)
+            f"{int(length)}": value(v, n)
+            for length, v, n in zip(SEGMENT_LENGTHS, kitti.t_err_pct_by_length, kitti.segments_by_length)
         },
         "r_err_deg_per_100m_by_length": {
             f"{int(length)}": value(v, n)

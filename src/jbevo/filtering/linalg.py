@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 #: Largest matrix size that is factorised by unrolled elementwise code.
 UNROLL_MAX = 8
@@ -28,8 +28,9 @@ UNROLL_MAX = 8
 PIVOT_FLOOR = 1e-12
 
 
-def symmetrize(a: Float[Array, "... n n"]) -> Float[Array, "... n n"]:
+def symmetrize(a: Float[ArrayLike, "... n n"]) -> Float[Array, "... n n"]:
     """Return ``(a + a^T) / 2``: removes the round-off asymmetry of covariance updates."""
+    a = jnp.asarray(a)
     return 0.5 * (a + jnp.swapaxes(a, -1, -2))
 
 
@@ -40,7 +41,7 @@ def _floored_rsqrt(s: Array, diag: Array) -> Array:
     return jax.lax.rsqrt(jnp.where(s > floor, s, floor))
 
 
-def cholesky(a: Float[Array, "... n n"]) -> Float[Array, "... n n"]:
+def cholesky(a: Float[ArrayLike, "... n n"]) -> Float[Array, "... n n"]:
     """Lower Cholesky factor ``L`` with ``L @ L^T = a`` for symmetric positive definite ``a``.
 
     Only the lower triangle of ``a`` is read. Pivots are floored at ``PIVOT_FLOOR`` times the
@@ -53,6 +54,7 @@ def cholesky(a: Float[Array, "... n n"]) -> Float[Array, "... n n"]:
     Computed column by column on vectors (right-looking): each column costs one ``rsqrt``, so
     XLA keeps a whole column in one fused kernel.
     """
+    a = jnp.asarray(a)
     n = a.shape[-1]
     if n > UNROLL_MAX:
         return jnp.linalg.cholesky(a)
@@ -68,8 +70,9 @@ def cholesky(a: Float[Array, "... n n"]) -> Float[Array, "... n n"]:
     return jnp.stack(full, axis=-1)
 
 
-def solve_lower(low: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> Float[Array, "... n k"]:
+def solve_lower(low: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> Float[Array, "... n k"]:
     """Solve ``low @ x = b`` for lower-triangular ``low`` by forward substitution."""
+    low, b = jnp.asarray(low), jnp.asarray(b)
     n = low.shape[-1]
     if n > UNROLL_MAX:
         import jax.scipy.linalg as jsl
@@ -84,7 +87,7 @@ def solve_lower(low: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> Flo
     return jnp.stack(xs, axis=-2)
 
 
-def whiten(a: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> tuple[Float[Array, "... n k"], Float[Array, "..."]]:
+def whiten(a: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> tuple[Float[Array, "... n k"], Float[Array, "..."]]:
     """``L^-1 b`` and ``log det a`` for ``L = cholesky(a)``, without forming ``L``.
 
     This is all a Kalman update needs of the innovation covariance: with ``b = [Pxz^T | y]``
@@ -93,6 +96,7 @@ def whiten(a: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> tuple[Floa
     column and no division, so XLA fuses each column into one kernel. Pivots are floored as in
     :func:`cholesky`.
     """
+    a, b = jnp.asarray(a), jnp.asarray(b)
     n = a.shape[-1]
     if n > UNROLL_MAX:
         low = jnp.linalg.cholesky(a)
@@ -111,34 +115,36 @@ def whiten(a: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> tuple[Floa
     return jnp.stack(xs, axis=-2), logdet
 
 
-def solve_upper_transposed(low: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> Float[Array, "... n k"]:
+def solve_upper_transposed(low: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> Float[Array, "... n k"]:
     """Solve ``low^T @ x = b`` for lower-triangular ``low`` by back substitution."""
+    low, b = jnp.asarray(low), jnp.asarray(b)
     n = low.shape[-1]
     if n > UNROLL_MAX:
         import jax.scipy.linalg as jsl
 
         return jsl.solve_triangular(low, b, lower=True, trans="T")
-    xs = [None] * n
+    xs: dict[int, Array] = {}
     for i in reversed(range(n)):
         s = b[..., i, :]
         for k in range(i + 1, n):
             s = s - low[..., k, i, None] * xs[k]
         xs[i] = s / low[..., i, i, None]
-    return jnp.stack(xs, axis=-2)
+    return jnp.stack([xs[i] for i in range(n)], axis=-2)
 
 
-def cho_solve(low: Float[Array, "... n n"], b: Float[Array, "... n k"]) -> Float[Array, "... n k"]:
+def cho_solve(low: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> Float[Array, "... n k"]:
     """Solve ``(low @ low^T) x = b`` given the lower Cholesky factor ``low``."""
     return solve_upper_transposed(low, solve_lower(low, b))
 
 
-def logdet_from_cholesky(low: Float[Array, "... n n"]) -> Float[Array, "..."]:
+def logdet_from_cholesky(low: Float[ArrayLike, "... n n"]) -> Float[Array, "..."]:
     """``log det(low @ low^T)`` from the lower Cholesky factor."""
+    low = jnp.asarray(low)
     n = low.shape[-1]
     return 2.0 * sum((jnp.log(low[..., i, i]) for i in range(1, n)), jnp.log(low[..., 0, 0]))
 
 
-def is_positive_definite(a: Float[Array, "... n n"]) -> Array:
+def is_positive_definite(a: Float[ArrayLike, "... n n"]) -> Array:
     """True where ``a`` is finite, symmetric (to round-off) and positive definite.
 
     Uses LAPACK's Cholesky (no pivot floor), so a singular or indefinite matrix gives False.
@@ -150,7 +156,19 @@ def is_positive_definite(a: Float[Array, "... n n"]) -> Array:
     eps = jnp.finfo(safe.dtype).eps
     sym = jnp.max(jnp.abs(safe - jnp.swapaxes(safe, -1, -2)), axis=(-2, -1)) <= 100 * eps * scale
     chol = jnp.linalg.cholesky(symmetrize(safe))
-    pd = jnp.all(jnp.isfinite(chol), axis=(-2, -1)) & jnp.all(
-        jnp.diagonal(chol, axis1=-2, axis2=-1) > 0, axis=-1
-    )
+    pd = jnp.all(jnp.isfinite(chol), axis=(-2, -1)) & jnp.all(jnp.diagonal(chol, axis1=-2, axis2=-1) > 0, axis=-1)
     return finite & sym & pd
+
+
+__all__ = [
+    "PIVOT_FLOOR",
+    "UNROLL_MAX",
+    "cho_solve",
+    "cholesky",
+    "is_positive_definite",
+    "logdet_from_cholesky",
+    "solve_lower",
+    "solve_upper_transposed",
+    "symmetrize",
+    "whiten",
+]

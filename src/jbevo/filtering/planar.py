@@ -22,7 +22,6 @@ from jbevo.filtering.ukf import StateSpaceModel
 from jbevo.filtering.unscented import circular_mean_fn, wrapped_add_fn, wrapped_residual_fn
 from jbevo.geometry.se2 import se2_compose
 
-
 #: Index of yaw in the planar state and in the pose-fix measurement.
 YAW = 2
 

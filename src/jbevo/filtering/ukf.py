@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from jbevo.filtering import linalg
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
@@ -66,7 +66,7 @@ class StateSpaceModel(eqx.Module):
     """
 
     motion: Callable[[Array, Any], Array] = eqx.field(static=True)
-    measurement: Callable[[Array], Array] = eqx.field(static=True)
+    measurement: Callable[..., Array] = eqx.field(static=True)
     state_residual: ResidualFn | None = eqx.field(static=True, default=None)
     state_add: AddFn | None = eqx.field(static=True, default=None)
     state_mean: MeanFn | None = eqx.field(static=True, default=None)
@@ -165,23 +165,29 @@ def update(
 
 
 def linear_update(
-    state: GaussianState, h: Float[Array, " n"], innovation: Float[Array, ""], variance: Float[Array, ""],
-    use: Bool[Array, ""] | bool = True,
+    state: GaussianState,
+    h: Float[ArrayLike, " n"],
+    innovation: Float[ArrayLike, ""],
+    variance: Float[ArrayLike, ""],
+    use: Bool[ArrayLike, ""] | bool = True,
 ) -> GaussianState:
     """Kalman update with one scalar linear measurement ``z = h x + v``, ``v ~ N(0, variance)``,
     given its ``innovation`` ``z - h mean``; the covariance is symmetrised, and the belief is left
     unchanged where ``use`` is False. For measurements that are linear in the state (no sigma
     points needed), as the attitude filters' pitch measurements from the BEV are."""
     mean, cov = state
+    h = jnp.asarray(h, mean.dtype)
     ph = cov @ h
     gain = ph / (h @ ph + variance)
     new = GaussianState(mean + gain * innovation, linalg.symmetrize(cov - jnp.outer(gain, ph)))
     return jax.tree_util.tree_map(lambda a, b: jnp.where(use, a, b), new, state)
 
 
-def _noise_at(noise: Array, t_noise):
+def _noise_at(noise: Array | None, t_noise: Array | None) -> Array:
     """Per-step noise: the scanned slice if the noise has a time axis, else the constant."""
-    return noise if t_noise is None else t_noise
+    chosen = noise if t_noise is None else t_noise
+    assert chosen is not None  # filter() passes one of the two
+    return chosen
 
 
 def _step(model, scheme, q_const, r_const, state, inputs):
@@ -217,9 +223,7 @@ def filter(
     ``lax.scan``. ``measurement_inputs`` (a pytree with leading axis ``T``, or ``None``) is
     passed to the model as ``measurement(x, measurement_inputs[t])``.
     """
-    initial = GaussianState(*(jnp.asarray(a) for a in initial))
-    measurements = jnp.asarray(measurements)
-    motion_cov, measurement_cov = jnp.asarray(motion_cov), jnp.asarray(measurement_cov)
+    initial, measurements, motion_cov, measurement_cov = _promoted(initial, measurements, motion_cov, measurement_cov)
     n = _check_state(initial)
     if measurements.ndim != 2:
         raise ValueError(f"measurements must have shape (T, m), got {measurements.shape}")
@@ -282,8 +286,7 @@ def filter_blocks(
         mask = jnp.asarray(mask, dtype=bool)
         if mask.shape != measurements.shape:
             raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {mask.shape}")
-    motion_cov, measurement_cov = jnp.asarray(motion_cov), jnp.asarray(measurement_cov)
-    initial = GaussianState(*(jnp.asarray(a) for a in initial))
+    initial, measurements, motion_cov, measurement_cov = _promoted(initial, measurements, motion_cov, measurement_cov)
     n = _check_state(initial)
     _check_noise(motion_cov, n, None, "motion_cov")
     _check_noise(measurement_cov, m, None, "measurement_cov")
@@ -308,6 +311,15 @@ def filter_blocks(
 # ----------------------------------------------------------------------------- input checks
 
 
+def _promoted(initial, measurements, motion_cov, measurement_cov):
+    """The belief, measurements and noise as arrays of one floating dtype (the widest of them):
+    the scan's carry keeps its type from step to step."""
+    arrays = [jnp.asarray(a) for a in (*initial, measurements, motion_cov, measurement_cov)]
+    dtype = jnp.result_type(*arrays, jnp.float32)
+    mean, cov, measurements, motion_cov, measurement_cov = (a.astype(dtype) for a in arrays)
+    return GaussianState(mean, cov), measurements, motion_cov, measurement_cov
+
+
 def _check_state(initial: GaussianState) -> int:
     mean, cov = initial
     if mean.ndim != 1:
@@ -330,9 +342,7 @@ def _check_controls(controls: Any, steps: int, name: str, axis: str, block: int 
         shape = jnp.shape(leaf)
         lead = (steps,) if block is None else (steps, block)
         if shape[: len(lead)] != lead:
-            raise ValueError(
-                f"every {name} leaf must have leading axes {lead} matching measurements ({axis}), got {shape}"
-            )
+            raise ValueError(f"every {name} leaf must have leading axes {lead} matching measurements ({axis}), got {shape}")
 
 
 def _check_model(model: StateSpaceModel, initial: GaussianState, control: Any, m: int, z_input: Any = None) -> None:
@@ -343,9 +353,7 @@ def _check_model(model: StateSpaceModel, initial: GaussianState, control: Any, m
         raise ValueError(f"model.motion must return a state of shape ({n},), got {getattr(moved, 'shape', moved)}")
     z = jax.eval_shape(model.measurement, x) if z_input is None else jax.eval_shape(model.measurement, x, z_input)
     if getattr(z, "shape", None) != (m,):
-        raise ValueError(
-            f"model.measurement must return shape ({m},) to match the measurements, got {getattr(z, 'shape', z)}"
-        )
+        raise ValueError(f"model.measurement must return shape ({m},) to match the measurements, got {getattr(z, 'shape', z)}")
 
 
 def _checked(initial, controls, motion_cov, measurement_cov):
@@ -353,9 +361,7 @@ def _checked(initial, controls, motion_cov, measurement_cov):
     bad_controls = jnp.array(False)
     for leaf in jax.tree.leaves(controls):
         bad_controls = bad_controls | ~jnp.all(jnp.isfinite(leaf))
-    controls = jax.tree.map(
-        lambda a: eqx.error_if(a, bad_controls, "controls contain NaN or inf"), controls
-    )
+    controls = jax.tree.map(lambda a: eqx.error_if(a, bad_controls, "controls contain NaN or inf"), controls)
     mean = eqx.error_if(initial.mean, ~jnp.all(jnp.isfinite(initial.mean)), "initial mean is not finite")
     cov = eqx.error_if(
         initial.cov, ~linalg.is_positive_definite(initial.cov), "initial cov is not finite symmetric positive definite"
@@ -374,6 +380,15 @@ def _checked(initial, controls, motion_cov, measurement_cov):
 
 
 __all__ = [
-    "CholeskyCovariance", "DiagonalCovariance", "FilterResult", "GaussianState", "Scheme", "StateSpaceModel", "filter",
-    "filter_blocks", "linear_update", "predict", "update",
+    "CholeskyCovariance",
+    "DiagonalCovariance",
+    "FilterResult",
+    "GaussianState",
+    "Scheme",
+    "StateSpaceModel",
+    "filter",
+    "filter_blocks",
+    "linear_update",
+    "predict",
+    "update",
 ]

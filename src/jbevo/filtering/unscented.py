@@ -290,3 +290,25 @@ def circular_mean_fn(angle_dims: Sequence[int]) -> MeanFn:
         return _wrap_where(mask, ref + weighted_sum(weights, centred))
 
     return mean
+
+
+__all__ = [
+    "AddFn",
+    "Julier",
+    "MeanFn",
+    "MerweScaled",
+    "ResidualFn",
+    "SigmaWeights",
+    "UnscentedResult",
+    "circular_mean_fn",
+    "offset_points",
+    "residuals",
+    "sigma_offsets",
+    "sigma_points",
+    "unscented_transform",
+    "weighted_mean",
+    "weighted_outer",
+    "weighted_sum",
+    "wrapped_add_fn",
+    "wrapped_residual_fn",
+]

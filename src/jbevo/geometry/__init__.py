@@ -15,7 +15,19 @@ from jbevo.geometry.sincos import sincos
 from jbevo.geometry.so3 import matrix_to_quaternion, quaternion_to_matrix
 
 __all__ = [
-    "BevGrid", "Camera", "euler_zyx", "level_to_body", "matrix_to_quaternion", "planar_to_se3", "poses_from_euler",
-    "project_ground_points", "quaternion_to_matrix", "rotation_zyx", "se2_between", "se2_compose", "se3_to_planar", "sincos",
+    "BevGrid",
+    "Camera",
+    "euler_zyx",
+    "level_to_body",
+    "matrix_to_quaternion",
+    "planar_to_se3",
+    "poses_from_euler",
+    "project_ground_points",
+    "quaternion_to_matrix",
+    "rotation_zyx",
+    "se2_between",
+    "se2_compose",
+    "se3_to_planar",
+    "sincos",
     "wrap_angle",
 ]

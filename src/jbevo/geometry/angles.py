@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 
-def wrap_angle(angle: Float[Array, "..."]) -> Float[Array, "..."]:
+def wrap_angle(angle: Float[ArrayLike, "..."]) -> Float[Array, "..."]:
     """Wrap angles to [-pi, pi). Differentiable (derivative 1 almost everywhere).
 
     Written with ``floor`` and multiplies rather than ``mod``: XLA treats ``remainder`` as an

@@ -18,8 +18,7 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float
-
+from jaxtyping import Array, ArrayLike, Float
 
 # Body -> camera for a camera looking straight ahead: camera x = -body y, y = -body z, z = body x.
 FORWARD = ((0.0, -1.0, 0.0), (0.0, 0.0, -1.0), (1.0, 0.0, 0.0))
@@ -52,9 +51,10 @@ class Camera(eqx.Module):
         return cls(718.856, 718.856, 607.1928, 185.2157, (376, 1241), height)
 
 
-def level_to_body(pitch: Float[Array, ""], roll: Float[Array, ""]) -> Float[Array, "3 3"]:
+def level_to_body(pitch: Float[ArrayLike, ""], roll: Float[ArrayLike, ""]) -> Float[Array, "3 3"]:
     """``R_level_body = Ry(pitch) Rx(roll)``: body axes expressed in the level frame (ZYX Euler
     without the yaw)."""
+    pitch, roll = jnp.asarray(pitch), jnp.asarray(roll)
     cp, sp, cr, sr = jnp.cos(pitch), jnp.sin(pitch), jnp.cos(roll), jnp.sin(roll)
     zero, one = jnp.zeros_like(cp), jnp.ones_like(cp)
     ry = jnp.stack([jnp.stack([cp, zero, sp]), jnp.stack([zero, one, zero]), jnp.stack([-sp, zero, cp])])
@@ -92,4 +92,12 @@ def project_ground_points(camera: Camera, pitch, roll, xy: Float[Array, "... 2"]
     return jnp.stack([u, v], axis=-1), in_front
 
 
-__all__ = ["FORWARD", "Camera", "apply_homography", "ground_to_image_homography", "level_to_body", "level_to_camera", "project_ground_points"]
+__all__ = [
+    "FORWARD",
+    "Camera",
+    "apply_homography",
+    "ground_to_image_homography",
+    "level_to_body",
+    "level_to_camera",
+    "project_ground_points",
+]

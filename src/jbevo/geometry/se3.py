@@ -19,6 +19,7 @@ def rotation_angle(pose: Float[Array, "... 4 4"]) -> Float[Array, "..."]:
 
 
 def translation_norm(pose: Float[Array, "... 4 4"]) -> Float[Array, "..."]:
+    """The length of each pose's translation."""
     return jnp.linalg.norm(pose[..., :3, 3], axis=-1)
 
 

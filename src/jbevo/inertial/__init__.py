@@ -6,6 +6,12 @@ from jbevo.inertial.kinematics import GRAVITY, accel_tilt, body_acceleration, eu
 from jbevo.inertial.speed_aided import SpeedAidedAttitude
 
 __all__ = [
-    "GRAVITY", "AttitudeFilter", "SpeedAidedAttitude", "accel_tilt", "body_acceleration", "euler_rates", "gyro_yaw_increment",
+    "GRAVITY",
+    "AttitudeFilter",
+    "SpeedAidedAttitude",
+    "accel_tilt",
+    "body_acceleration",
+    "euler_rates",
+    "gyro_yaw_increment",
     "tilt_measurements",
 ]

@@ -133,7 +133,12 @@ class AttitudeFilter(FilterNoise):
         bias_in_compensation = self.gyro_bias and velocity is not None
         model = attitude_model(self.dt, bias_in_compensation)
         result = ukf.filter(
-            model, prior, gyro, z, self.motion_noise(), self.measurement_noise(),
+            model,
+            prior,
+            gyro,
+            z,
+            self.motion_noise(),
+            self.measurement_noise(),
             measurement_inputs=v3 if bias_in_compensation else None,
         )
         return result.filtered_mean[:, :2]

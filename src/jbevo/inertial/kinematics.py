@@ -11,7 +11,6 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-
 GRAVITY = 9.80665
 
 
@@ -54,16 +53,16 @@ def fill_missing(samples: Float[Array, "S 3"]) -> Float[Array, "S 3"]:
     return jnp.where(ok, jnp.where(ok, samples, 0.0), mean)
 
 
-def body_acceleration(
-    velocity: Float[Array, "T 2"], gyro: Float[Array, "T 3"], frame_dt: float
-) -> Float[Array, "T 3"]:
+def body_acceleration(velocity: Float[Array, "T 2"], gyro: Float[Array, "T 3"], frame_dt: float) -> Float[Array, "T 3"]:
     """Predicted body-frame acceleration ``dv/dt + w x v`` of a vehicle whose body-frame velocity
     is planar, ``v = (vx, vy, 0)`` (what the odometry gives), with ``w`` the frame's mean gyro.
 
     For a car without side slip (``vy = 0``) this is ``(dvx/dt, vx wz, -vx wy)``.
     """
     v = jnp.concatenate([velocity, jnp.zeros_like(velocity[:, :1])], axis=-1)
-    return jnp.gradient(v, frame_dt, axis=0) + jnp.cross(gyro, v)
+    # The time derivative by central differences (one-sided at the ends).
+    dv = jnp.concatenate([v[1:2] - v[:1], 0.5 * (v[2:] - v[:-2]), v[-1:] - v[-2:-1]]) / frame_dt
+    return dv + jnp.cross(gyro, v)
 
 
 def tilt_measurements(accel: Float[Array, "T S 3"], compensation: Float[Array, "T 3"] | None = None) -> Array:
@@ -75,4 +74,13 @@ def tilt_measurements(accel: Float[Array, "T S 3"], compensation: Float[Array, "
     return jnp.where(count > 0, tilt, jnp.nan)
 
 
-__all__ = ["GRAVITY", "accel_tilt", "body_acceleration", "euler_rates", "fill_missing", "gyro_yaw_increment", "tilt_measurements", "valid_mean"]
+__all__ = [
+    "GRAVITY",
+    "accel_tilt",
+    "body_acceleration",
+    "euler_rates",
+    "fill_missing",
+    "gyro_yaw_increment",
+    "tilt_measurements",
+    "valid_mean",
+]

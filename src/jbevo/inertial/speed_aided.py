@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from jbevo.filtering import ukf
 from jbevo.filtering.noise import DiagonalCovariance
@@ -45,7 +45,12 @@ class AttitudeState(NamedTuple):
 
     @classmethod
     def initial(
-        cls, pitch_roll: Float[Array, " 2"], speed: Float[Array, ""], pitch_roll_std: float, gyro_bias_std: float, speed_std: float
+        cls,
+        pitch_roll: Float[Array, " 2"],
+        speed: Float[Array, ""],
+        pitch_roll_std: float,
+        gyro_bias_std: float,
+        speed_std: float,
     ) -> AttitudeState:
         """A belief at ``pitch_roll`` and ``speed`` with zero gyro bias and independent standard
         deviations."""
@@ -86,12 +91,19 @@ class AttitudeState(NamedTuple):
         return AttitudeState(self.mean.astype(dtype), self.cov.astype(dtype))
 
     @staticmethod
-    def row(pitch=0.0, pitch_rate_bias=0.0, speed=0.0, dtype=None) -> Float[Array, " 6"]:
+    def row(
+        pitch: Float[ArrayLike, ""] = 0.0,
+        pitch_rate_bias: Float[ArrayLike, ""] = 0.0,
+        speed: Float[ArrayLike, ""] = 0.0,
+        dtype=None,
+    ) -> Float[Array, " 6"]:
         """The row ``h`` of a scalar measurement ``z = h . state`` given by its coefficients on the
         named entries."""
         dtype = dtype or jnp.result_type(pitch, pitch_rate_bias, speed, float)
         zero = jnp.zeros((), dtype)
-        return jnp.stack([jnp.asarray(pitch, dtype), zero, zero, jnp.asarray(pitch_rate_bias, dtype), zero, jnp.asarray(speed, dtype)])
+        return jnp.stack(
+            [jnp.asarray(pitch, dtype), zero, zero, jnp.asarray(pitch_rate_bias, dtype), zero, jnp.asarray(speed, dtype)]
+        )
 
 
 def _motion(state: Float[Array, " 6"], control, dt: float) -> Float[Array, " 6"]:
@@ -204,7 +216,10 @@ class SpeedAidedAttitude(FilterNoise):
 
     @staticmethod
     def update_linear(
-        state: AttitudeState, h: Float[Array, " 6"], innovation: Float[Array, ""], variance: Float[Array, ""],
+        state: AttitudeState,
+        h: Float[Array, " 6"],
+        innovation: Float[Array, ""],
+        variance: Float[Array, ""],
         use: Bool[Array, ""] | bool = True,
     ) -> AttitudeState:
         """A scalar measurement linear in the state (``h`` from :meth:`AttitudeState.row`) given its

@@ -17,7 +17,19 @@ from jbevo.models.presets import localization_model
 from jbevo.models.runners import run_bevo, run_bevo_batch, run_bevo_plus, run_bevo_plus_batch
 
 __all__ = [
-    "Bevo", "BevoOutput", "BevoPlus", "LocalizationOutput", "localization_loss", "localization_model", "map_matching_alone",
-    "motion_loss", "num_learnable", "planar_huber", "relative_motion", "run_bevo", "run_bevo_batch", "run_bevo_plus",
+    "Bevo",
+    "BevoOutput",
+    "BevoPlus",
+    "LocalizationOutput",
+    "localization_loss",
+    "localization_model",
+    "map_matching_alone",
+    "motion_loss",
+    "num_learnable",
+    "planar_huber",
+    "relative_motion",
+    "run_bevo",
+    "run_bevo_batch",
+    "run_bevo_plus",
     "run_bevo_plus_batch",
 ]

@@ -71,7 +71,7 @@ class Frame(NamedTuple):
     gyro: Float[Array, "S 3"]  #: the IMU block that ends at this frame (rad/s; NaN rows: missing)
     accel: Float[Array, "S 3"]  #: its specific force (m/s^2)
     true_pitch_roll: Float[Array, " 2"]  #: the ground truth's (used by ``attitude_source="truth"`` only)
-    index: Int[Array, ""]  #: the frame's index in the sequence (0: no previous BEV)
+    number: Int[Array, ""]  #: the frame's index in the sequence (0: no previous BEV)
 
 
 class BevoCarry(NamedTuple):
@@ -140,8 +140,13 @@ class Bevo(eqx.Module):
 
     @classmethod
     def create(
-        cls, grid: BevGrid | None = None, imu_dt: float = 0.01, attitude_source: str = "filter",
-        gyro_window: float = 0.0, bands: bool = False, **dpc_kwargs,
+        cls,
+        grid: BevGrid | None = None,
+        imu_dt: float = 0.01,
+        attitude_source: str = "filter",
+        gyro_window: float = 0.0,
+        bands: bool = False,
+        **dpc_kwargs,
     ) -> Bevo:
         """Hand-set defaults: :meth:`SpeedAidedAttitude.create`, DPC's defaults with 256
         angles, a 128 x 128 BEV at 0.1 m from 7.5 m ahead, and with ``bands``
@@ -151,7 +156,12 @@ class Bevo(eqx.Module):
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
         dpc_kwargs.setdefault("n_angles", 256)
         return cls(
-            SpeedAidedAttitude.create(imu_dt), DPCParams(**dpc_kwargs), grid, 4, attitude_source, float(gyro_window),
+            SpeedAidedAttitude.create(imu_dt),
+            DPCParams(**dpc_kwargs),
+            grid,
+            4,
+            attitude_source,
+            float(gyro_window),
             BandGeometry.create() if bands else None,
         )
 
@@ -175,7 +185,9 @@ class Bevo(eqx.Module):
         if initial_pose is None:
             initial_pose = jnp.nan_to_num(seq.planar[0])
         dtype = jnp.result_type(float)
-        seq = eqx.tree_at(lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype)))
+        seq = eqx.tree_at(
+            lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype))
+        )
         attitude = self.initial_attitude(seq, warm_start).astype(dtype)
         carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype))
         frames = Frame(seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
@@ -233,7 +245,7 @@ class Bevo(eqx.Module):
         pitch_roll = self.projection_attitude(belief, frame)
         bev = self.bev(frame.image, pitch_roll, camera)
         reg = self._register(carry.bev, bev, belief, frame, pitch_roll)
-        moving = frame.index > 0
+        moving = frame.number > 0
         rotation, translation = reg.rotation, reg.translation
         if self.bands is not None:
             height = jnp.asarray(camera.height, bev.dtype)
@@ -253,8 +265,13 @@ class Bevo(eqx.Module):
         return Observation(belief, pitch_roll, bev, increment, jnp.where(moving, reg.confidence, 0.0))
 
     def advance(
-        self, carry: BevoCarry, observation: Observation, frame: Frame, camera: Camera,
-        attitude: AttitudeState | None = None, reproject: bool | None = None,
+        self,
+        carry: BevoCarry,
+        observation: Observation,
+        frame: Frame,
+        camera: Camera,
+        attitude: AttitudeState | None = None,
+        reproject: bool | None = None,
     ) -> BevoCarry:
         """The carry for the next frame: the final ``attitude`` (default: the observation's),
         this frame's BEV, projected once more at that attitude when ``reproject`` (default: with
@@ -276,9 +293,7 @@ class Bevo(eqx.Module):
         carry = self.advance(carry, observation, frame, camera)
         return carry, BevoOutput(observation.increment, observation.pitch_roll, observation.confidence, carry.pose)
 
-    def __call__(
-        self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False
-    ) -> BevoOutput:
+    def __call__(self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False) -> BevoOutput:
         """Run over an unbatched sequence (``jax.vmap`` for batches). ``initial_pose`` defaults to
         the sequence's ground truth at frame 0 (zeros where unknown).
 

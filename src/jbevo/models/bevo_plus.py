@@ -55,12 +55,12 @@ from jbevo.data.sequence import Sequence
 from jbevo.filtering import ukf
 from jbevo.filtering.planar import CHI2_3DOF_999, YAW, planar_pose_model
 from jbevo.geometry.angles import wrap_angle
+from jbevo.geometry.bev_grid import BevGrid
+from jbevo.geometry.camera import Camera
 from jbevo.inertial.kinematics import gyro_yaw_increment
 from jbevo.models.bevo import Bevo, BevoCarry, Frame, Observation
 from jbevo.models.parameters import num_learnable
-from jbevo.geometry.bev_grid import BevGrid
 from jbevo.vision.bev import bev_project
-from jbevo.geometry.camera import Camera
 from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.map_matching import MapMatch, match_to_map
 
@@ -132,8 +132,19 @@ class BevoPlus(eqx.Module):
         map_dpc_kwargs.setdefault("n_angles", 128)
         f = jnp.float32
         return cls(
-            odometry, DPCParams(**map_dpc_kwargs), jnp.log(jnp.asarray(motion_std, f)), jnp.log(jnp.asarray(fix_std, f)),
-            jnp.log(f(confidence_power)), jnp.log(f(pitch_gain)), jnp.log(f(pitch_std)), map_grid, 2, gyro_yaw, float(min_confidence), float(gate), int(reacquire_after),
+            odometry,
+            DPCParams(**map_dpc_kwargs),
+            jnp.log(jnp.asarray(motion_std, f)),
+            jnp.log(jnp.asarray(fix_std, f)),
+            jnp.log(f(confidence_power)),
+            jnp.log(f(pitch_gain)),
+            jnp.log(f(pitch_std)),
+            map_grid,
+            2,
+            gyro_yaw,
+            float(min_confidence),
+            float(gate),
+            int(reacquire_after),
         )
 
     def num_learnable(self) -> int:
@@ -158,7 +169,9 @@ class BevoPlus(eqx.Module):
         rot = jnp.eye(3, dtype=std.dtype).at[:2, :2].set(jnp.stack([jnp.stack([cy, -sy]), jnp.stack([sy, cy])]))
         return rot @ jnp.diag(std**2) @ rot.T
 
-    def match(self, image: Array, pitch_roll: Float[Array, " 2"], camera: Camera, map_: Map, pose: Float[Array, " 3"]) -> MapMatch:
+    def match(
+        self, image: Array, pitch_roll: Float[Array, " 2"], camera: Camera, map_: Map, pose: Float[Array, " 3"]
+    ) -> MapMatch:
         """Project an 8-bit ``image`` on the map-matching grid at ``pitch_roll`` and match it
         against the map at ``pose`` (:func:`match_to_map` with this model's parameters)."""
         bev, valid = bev_project(image.astype(pose.dtype) * (1.0 / 255.0), pitch_roll[0], pitch_roll[1], camera, self.map_grid)
@@ -204,7 +217,15 @@ class BevoPlus(eqx.Module):
             pose = jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), pose, carry.pose)
             std = jnp.sqrt(jnp.maximum(pose.cov[0, 0] + pose.cov[1, 1], 0.0))
             out = LocalizationOutput(
-                pose.mean, pose.cov, match.fix, match.confidence.astype(dtype), accept, reacquire, std, odometry.pose, self._increment(seen, frame),
+                pose.mean,
+                pose.cov,
+                match.fix,
+                match.confidence.astype(dtype),
+                accept,
+                reacquire,
+                std,
+                odometry.pose,
+                self._increment(seen, frame),
             )
             return LocalizationCarry(odometry, pose, streak), out
 
@@ -218,14 +239,14 @@ class BevoPlus(eqx.Module):
             return seen.increment
         pitch_roll = seen.pitch_roll
         turn = gyro_yaw_increment(frame.gyro - seen.attitude.gyro_bias, pitch_roll[0], pitch_roll[1], self.odometry.attitude.dt)
-        return seen.increment.at[YAW].set(jnp.where(frame.index > 0, turn, 0.0))
+        return seen.increment.at[YAW].set(jnp.where(frame.number > 0, turn, 0.0))
 
     def predict_pose(self, state: ukf.GaussianState, seen: Observation, frame: Frame) -> ukf.GaussianState:
         """The pose filter's prediction with the odometry's increment and ``Q(c)`` (none at
         frame 0)."""
         q = self.motion_covariance(seen.confidence).astype(state.mean.dtype)
         moved = ukf.predict(planar_pose_model(), state, self._increment(seen, frame), q)
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(frame.index > 0, a, b), moved, state)
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(frame.number > 0, a, b), moved, state)
 
     def update_pose(
         self, predicted: ukf.GaussianState, match: MapMatch, streak: Int[Array, ""]

@@ -7,6 +7,13 @@ from jbevo.training.validation import validate, validate_localization
 from jbevo.training.windows import training_windows
 
 __all__ = [
-    "TrainingDiverged", "checkpoint", "make_step", "run_epoch", "save_epoch", "start_run", "training_windows", "validate",
+    "TrainingDiverged",
+    "checkpoint",
+    "make_step",
+    "run_epoch",
+    "save_epoch",
+    "start_run",
+    "training_windows",
+    "validate",
     "validate_localization",
 ]

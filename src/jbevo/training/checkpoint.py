@@ -54,9 +54,7 @@ def rebuild(description: Any) -> Any:
             expected = {f.name for f in dataclasses.fields(cls)}
             got = set(description["fields"])
             if got != expected:
-                raise ValueError(
-                    f"{cls.__qualname__} has the fields {sorted(expected)}, the checkpoint {sorted(got)}"
-                )
+                raise ValueError(f"{cls.__qualname__} has the fields {sorted(expected)}, the checkpoint {sorted(got)}")
             obj = object.__new__(cls)
             for name, value in description["fields"].items():
                 object.__setattr__(obj, name, rebuild(value))

@@ -15,9 +15,7 @@ from jbevo.models.runners import run_bevo, run_bevo_batch, run_bevo_plus
 from jbevo.training.windows import training_windows
 
 
-def validate(
-    model: Bevo, seqs: list[Sequence], lengths: tuple[float, ...], window: int = 0, warm_start: bool = False
-) -> dict:
+def validate(model: Bevo, seqs: list[Sequence], lengths: tuple[float, ...], window: int = 0, warm_start: bool = False) -> dict:
     """:func:`jbevo.eval.scores.score` of ``model`` over ``seqs``: the whole sequences
     (``window`` 0; from a cold start, or from the truth's attitude and speed with
     ``warm_start``), or windows of ``window`` frames, each warm-started (as training runs them)."""

@@ -17,6 +17,18 @@ from jbevo.vision.map_matching import MapMatch, map_crop, match_to_map
 from jbevo.vision.registration import Registration, register, register_translation
 
 __all__ = [
-    "BandGeometry", "BandShifts", "DPCParams", "MapMatch", "Registration", "bev_increment", "bev_project", "feather_to_mean",
-    "feathered_bev", "map_crop", "match_to_map", "register", "register_bands", "register_translation",
+    "BandGeometry",
+    "BandShifts",
+    "DPCParams",
+    "MapMatch",
+    "Registration",
+    "bev_increment",
+    "bev_project",
+    "feather_to_mean",
+    "feathered_bev",
+    "map_crop",
+    "match_to_map",
+    "register",
+    "register_bands",
+    "register_translation",
 ]

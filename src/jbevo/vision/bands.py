@@ -54,6 +54,7 @@ from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.phase_correlation import disk_window, rotate_image
 from jbevo.vision.registration import Registration, register_translation
 
+
 @functools.cache
 def band_moments(grid: BevGrid, taper: float, power: int) -> tuple[float, float]:
     """``E[x^power]`` over the far (top) and the near (bottom) half of ``grid`` under DPC's disk
@@ -64,7 +65,7 @@ def band_moments(grid: BevGrid, taper: float, power: int) -> tuple[float, float]
         window = np.asarray(disk_window((half, cols), taper))
     x = (grid.origin[0] - np.arange(rows)) * grid.resolution
     weights = window.sum(1)
-    moment = lambda xs: float(np.sum(weights * xs**power) / np.sum(weights))  # noqa: E731
+    moment = lambda xs: float(np.sum(weights * xs**power) / np.sum(weights))
     return moment(x[:half]), moment(x[half : 2 * half])
 
 
@@ -137,7 +138,10 @@ class BandGeometry(eqx.Module):
         """The forward-shift slope of the band pair as a scalar measurement of the attitude the
         current BEV was projected with (module docstring): ``m = [2 D (p - p_hat) + c T (b_y -
         b_hat_y)] / h``, whose prediction at that attitude is zero."""
-        (x_far, x_near), (m2_far, m2_near) = band_moments(grid, params.window_taper, 1), band_moments(grid, params.window_taper, 2)
+        (x_far, x_near), (m2_far, m2_near) = (
+            band_moments(grid, params.window_taper, 1),
+            band_moments(grid, params.window_taper, 2),
+        )
         travel = self._extrapolate(shifts.forward, grid, params)
         c = (m2_far - m2_near) / (x_far - x_near) + 2.0 * travel
         slope = self._slope(shifts.forward, grid, params)
@@ -159,12 +163,18 @@ class BandGeometry(eqx.Module):
         previous BEV's pitch ``drift`` relative to the current one (radians, the estimated
         ``(b_hat - b) T``), the rotation corrected by the bands' lateral shifts, and the lateral
         translation taken at the BEV's centre row."""
-        (x_far, x_near), (m2_far, m2_near) = band_moments(grid, params.window_taper, 1), band_moments(grid, params.window_taper, 2)
+        (x_far, x_near), (m2_far, m2_near) = (
+            band_moments(grid, params.window_taper, 1),
+            band_moments(grid, params.window_taper, 2),
+        )
         travel0 = self._extrapolate(shifts.forward, grid, params)
         h2 = height**2
-        forward = shifts.forward + drift / height * jnp.stack([
-            m2_far + 2.0 * travel0 * x_far + travel0**2 + h2, m2_near + 2.0 * travel0 * x_near + travel0**2 + h2,
-        ])
+        forward = shifts.forward + drift / height * jnp.stack(
+            [
+                m2_far + 2.0 * travel0 * x_far + travel0**2 + h2,
+                m2_near + 2.0 * travel0 * x_near + travel0**2 + h2,
+            ]
+        )
         travel = self._extrapolate(forward, grid, params)
         lat_far, lat_near = shifts.lateral[0], shifts.lateral[1]
         turn = (lat_far - lat_near) / (x_far - x_near)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from jax.scipy.ndimage import map_coordinates
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from jbevo.geometry.angles import wrap_angle
 from jbevo.geometry.bev_grid import BevGrid
@@ -40,7 +40,7 @@ def bev_to_image_homography(camera: Camera, grid: BevGrid, pitch, roll) -> Float
 
 
 def bev_project(
-    image: Float[Array, "H W"], pitch: Float[Array, ""], roll: Float[Array, ""], camera: Camera, grid: BevGrid
+    image: Float[Array, "H W"], pitch: Float[ArrayLike, ""], roll: Float[ArrayLike, ""], camera: Camera, grid: BevGrid
 ) -> tuple[Float[Array, "h w"], Bool[Array, "h w"]]:
     """The gravity-aligned BEV of a grayscale ``image`` taken at ``pitch`` and ``roll``.
 
@@ -63,7 +63,7 @@ def bev_project(
     return jnp.where(valid, bev, 0.0), valid
 
 
-def bev_increment(grid: BevGrid, rotation: Float[Array, ""], translation: Float[Array, " 2"]) -> Float[Array, " 3"]:
+def bev_increment(grid: BevGrid, rotation: Float[ArrayLike, ""], translation: Float[Array, " 2"]) -> Float[Array, " 3"]:
     """The body-frame motion ``(dx, dy, dyaw)`` from the pose a BEV ``a`` was taken at to the pose
     of BEV ``b``, given the :func:`jbevo.registration.register` result ``(rotation, translation)``
     that carries ``a`` onto ``b`` (same ``grid``).
@@ -74,7 +74,7 @@ def bev_increment(grid: BevGrid, rotation: Float[Array, ""], translation: Float[
     in the BEV opposite to the vehicle, and DPC measures turns about the image centre, not about
     the camera's ground point ``o``; the ``(R - I)(c - o)`` term moves the turn's centre there.
     """
-    dyaw = -rotation
+    dyaw = -jnp.asarray(rotation)
     c, s = jnp.cos(dyaw), jnp.sin(dyaw)
     r = jnp.stack([jnp.stack([c, -s]), jnp.stack([s, c])])
     rows, cols = grid.shape
@@ -85,9 +85,7 @@ def bev_increment(grid: BevGrid, rotation: Float[Array, ""], translation: Float[
     return jnp.stack([d[0], d[1], wrap_angle(dyaw)])
 
 
-def feathered_bev(
-    image: Array, pitch: Array, roll: Array, camera: Camera, grid: BevGrid, feather: int
-) -> Float[Array, "h w"]:
+def feathered_bev(image: Array, pitch: Array, roll: Array, camera: Camera, grid: BevGrid, feather: int) -> Float[Array, "h w"]:
     """The BEV of an 8-bit ``image`` (intensities in [0, 1]) with the pixels outside the camera's
     view at the mean of the valid ones and the view's edge feathered over ``feather`` pixels."""
     bev, valid = bev_project(image.astype(pitch.dtype) * (1.0 / 255.0), pitch, roll, camera, grid)

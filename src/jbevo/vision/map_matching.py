@@ -15,9 +15,9 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from jbevo.data.map import Map
+from jbevo.geometry.bev_grid import BevGrid
 from jbevo.geometry.se2 import se2_compose
 from jbevo.vision.bands import band_moments, register_bands
-from jbevo.geometry.bev_grid import BevGrid
 from jbevo.vision.bev import bev_increment, feather_to_mean
 from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.registration import register
@@ -42,7 +42,7 @@ def map_crop(map_: Map, pose: Float[Array, " 3"], grid: BevGrid) -> tuple[Float[
     r0 = jnp.clip(jnp.floor(jax.lax.stop_gradient(row)), 0, rows - 2).astype(jnp.int32)
     c0 = jnp.clip(jnp.floor(jax.lax.stop_gradient(col)), 0, cols - 2).astype(jnp.int32)
     fr, fc = row - r0, col - c0
-    tap = lambda dr, dc: map_.image[r0 + dr, c0 + dc].astype(dtype)  # noqa: E731
+    tap = lambda dr, dc: map_.image[r0 + dr, c0 + dc].astype(dtype)
     top = tap(0, 0) + fc * (tap(0, 1) - tap(0, 0))
     bottom = tap(1, 0) + fc * (tap(1, 1) - tap(1, 0))
     crop = (top + fr * (bottom - top)) * (1.0 / 255.0)
@@ -58,8 +58,15 @@ class MapMatch(NamedTuple):
 
 
 def match_to_map(
-    bev: Float[Array, "h w"], valid: Bool[Array, "h w"], map_: Map, pose: Float[Array, " 3"], grid: BevGrid,
-    params: DPCParams, height: Float[Array, ""], pitch_gain: Float[Array, ""] | float = 1.0, feather: int = 2,
+    bev: Float[Array, "h w"],
+    valid: Bool[Array, "h w"],
+    map_: Map,
+    pose: Float[Array, " 3"],
+    grid: BevGrid,
+    params: DPCParams,
+    height: Float[Array, ""],
+    pitch_gain: Float[Array, ""] | float = 1.0,
+    feather: int = 2,
 ) -> MapMatch:
     """Match a BEV (on ``grid``, ``valid`` its camera-view mask, camera ``height`` metres above
     the ground) against the map at ``pose``.

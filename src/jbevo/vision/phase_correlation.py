@@ -7,10 +7,9 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.ndimage import map_coordinates
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from jbevo.vision.dpc_params import DPCParams
-
 
 _TINY = 1e-30  # keeps sqrt differentiable at exactly zero spectra
 
@@ -49,7 +48,9 @@ def windowed(image: Float[Array, "H W"], window: Float[Array, "H W"]) -> Float[A
     return (image - mean) * window
 
 
-def rotate_image(image: Float[Array, "H W"], angle: Float[Array, ""], fill: Array | float = 0.0) -> Float[Array, "H W"]:
+def rotate_image(
+    image: Float[Array, "H W"], angle: Float[ArrayLike, ""], fill: Float[ArrayLike, ""] = 0.0
+) -> Float[Array, "H W"]:
     """``image`` turned by ``angle`` about its centre (positive: counter-clockwise as displayed),
     bilinear, ``fill`` outside."""
     h, w = image.shape
@@ -188,6 +189,8 @@ def _translation_correlation(fa: Array, fb: Array, shape: tuple[int, int], param
 
 
 def translation_from_spectra(fa: Array, fb: Array, shape: tuple[int, int], params: DPCParams):
+    """The translation ``(x, y)`` (pixels) between two images given their ``rfft2`` spectra, and the
+    peak's confidence relative to a perfect match."""
     corr, ideal = _translation_correlation(fa, fb, shape, params)
     temperature = jnp.exp(params.log_shift_temperature).astype(corr.dtype)
     pos, peak = soft_argmax_2d(corr, temperature, params.peak_half_width)
@@ -230,4 +233,14 @@ def estimate_rotation(
     return rotation, jnp.clip(peak / ideal, 0.0, 1.0)
 
 
-__all__ = ["disk_window", "estimate_rotation", "log_polar_spectrum", "rotate_image", "signed_position", "soft_argmax_1d", "soft_argmax_2d", "translation_from_spectra", "windowed"]
+__all__ = [
+    "disk_window",
+    "estimate_rotation",
+    "log_polar_spectrum",
+    "rotate_image",
+    "signed_position",
+    "soft_argmax_1d",
+    "soft_argmax_2d",
+    "translation_from_spectra",
+    "windowed",
+]

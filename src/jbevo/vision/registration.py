@@ -70,6 +70,11 @@ def _check_pair(a: Array, b: Array, min_size: int = 16) -> None:
         raise ValueError(f"images must be at least {min_size}x{min_size} pixels, got {a.shape[-2:]}")
 
 
+def _hw(image: Array) -> tuple[int, int]:
+    """The (rows, columns) of one image."""
+    return int(image.shape[0]), int(image.shape[1])
+
+
 def _check_finite(image: Array, name: str) -> Array:
     return eqx.error_if(image, ~jnp.all(jnp.isfinite(image)), f"register: image {name} contains NaN or inf")
 
@@ -98,15 +103,18 @@ def register_translation(
 
 def _register_translation_pair(a, b, params):
     a, b = _check_finite(a, "a"), _check_finite(b, "b")
-    window = disk_window(a.shape, params.window_taper, a.dtype)
+    window = disk_window(_hw(a), params.window_taper, a.dtype)
     fa = jnp.fft.rfft2(windowed(a, window))
     fb = jnp.fft.rfft2(windowed(b, window))
-    return translation_from_spectra(fa, fb, a.shape, params)
+    return translation_from_spectra(fa, fb, _hw(a), params)
 
 
 def register(
-    a: Float[Array, "*batch H W"], b: Float[Array, "*batch H W"], params: DPCParams | None = None,
-    rotation_prior: Float[Array, "*batch"] | None = None, prior_window: float = np.radians(2.0),
+    a: Float[Array, "*batch H W"],
+    b: Float[Array, "*batch H W"],
+    params: DPCParams | None = None,
+    rotation_prior: Float[Array, "*batch"] | None = None,
+    prior_window: float = np.radians(2.0),
 ) -> Registration:
     """Rotation (radians, ``[-pi, pi)``), translation ``(x, y)`` (pixels) and confidence that carry
     image ``a`` onto image ``b``; leading batch axes are vmapped.
@@ -134,26 +142,26 @@ def register(
 
 def _register_pair_prior(a, b, params, prior, window) -> Registration:
     a, b = _check_finite(a, "a"), _check_finite(b, "b")
-    win = disk_window(a.shape, params.window_taper, a.dtype)
+    win = disk_window(_hw(a), params.window_taper, a.dtype)
     wa, wb = windowed(a, win), windowed(b, win)
     half_turn, _ = estimate_rotation(wa, wb, params, prior, window)
     # The candidate (half_turn or half_turn + pi) nearest the prior.
     flip = jnp.abs(wrap_angle(half_turn - prior)) > jnp.pi / 2
     turned = rotate_image(wa, half_turn)
     turned = jnp.where(flip, turned[::-1, ::-1], turned)
-    t, c = translation_from_spectra(jnp.fft.rfft2(turned), jnp.fft.rfft2(wb), a.shape, params)
+    t, c = translation_from_spectra(jnp.fft.rfft2(turned), jnp.fft.rfft2(wb), _hw(a), params)
     return Registration(wrap_angle(jnp.where(flip, half_turn + jnp.pi, half_turn)), t, c)
 
 
 def _register_pair(a, b, params) -> Registration:
     a, b = _check_finite(a, "a"), _check_finite(b, "b")
-    window = disk_window(a.shape, params.window_taper, a.dtype)
+    window = disk_window(_hw(a), params.window_taper, a.dtype)
     wa, wb = windowed(a, window), windowed(b, window)
     half_turn, _ = estimate_rotation(wa, wb, params)
     turned = rotate_image(wa, half_turn)
     fb = jnp.fft.rfft2(wb)
-    t0, c0 = translation_from_spectra(jnp.fft.rfft2(turned), fb, a.shape, params)
-    t1, c1 = translation_from_spectra(jnp.fft.rfft2(turned[::-1, ::-1]), fb, a.shape, params)
+    t0, c0 = translation_from_spectra(jnp.fft.rfft2(turned), fb, _hw(a), params)
+    t1, c1 = translation_from_spectra(jnp.fft.rfft2(turned[::-1, ::-1]), fb, _hw(a), params)
     flip = c1 > c0
     rotation = wrap_angle(jnp.where(flip, half_turn + jnp.pi, half_turn))
     return Registration(rotation, jnp.where(flip, t1, t0), jnp.where(flip, c1, c0))

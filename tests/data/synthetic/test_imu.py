@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from jbevo.data.kitti_frames import body_poses_from_kitti
-from jbevo.data.synthetic.imu import ImuNoise, NOISELESS, simulate_imu
+from jbevo.data.synthetic.imu import NOISELESS, ImuNoise, simulate_imu
 from jbevo.geometry.euler import euler_zyx, rotation_zyx
 from jbevo.inertial.kinematics import GRAVITY
 
@@ -31,7 +31,7 @@ def test_circle_gives_the_analytic_gyro_and_specific_force():
     gyro = np.array([-np.sin(pitch) * yaw_rate, 0.0, np.cos(pitch) * yaw_rate])
     np.testing.assert_allclose(d.gyro[inner], np.broadcast_to(gyro, d.gyro[inner].shape), atol=1e-5)
     world = np.array([0.0, speed * yaw_rate, GRAVITY])  # centripetal (left) plus gravity
-    expected = (rotation_zyx(np.array([0.0, pitch, 0.0])).T @ world)
+    expected = rotation_zyx(np.array([0.0, pitch, 0.0])).T @ world
     # The world acceleration turns with the heading; in the body frame it is constant.
     np.testing.assert_allclose(d.accel[inner], np.broadcast_to(expected, d.accel[inner].shape), atol=2e-3)
     np.testing.assert_allclose(d.frame_euler[:, 1], pitch, atol=1e-12)

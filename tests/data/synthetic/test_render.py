@@ -5,10 +5,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jbevo.geometry.euler import rotation_zyx
 from jbevo.data.synthetic.render import SKY_HORIZON, render, render_batch
 from jbevo.data.synthetic.sequences import small_camera
 from jbevo.data.synthetic.world import World
+from jbevo.geometry.euler import rotation_zyx
 
 
 def _blob_world():
@@ -50,5 +50,8 @@ def test_sky_above_the_horizon_and_batch_equals_single():
     np.testing.assert_allclose(batch[1], render(world, camera, poses[1]), atol=1e-4)
     assert float(batch[0, 0].min()) >= SKY_HORIZON - 1e-6  # top row looks above the horizon
     assert bool(jnp.all(jnp.isfinite(batch)))
+
+
+def test_render_batch_names_bad_poses(as_users_run):
     with pytest.raises(ValueError, match="poses must have shape"):
-        render_batch(world, camera, poses[0])
+        render_batch(World.create("town01", size=128), small_camera(), jnp.eye(4))

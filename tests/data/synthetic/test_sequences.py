@@ -7,12 +7,16 @@ import numpy as np
 import pytest
 
 from jbevo import data
+from jbevo.cli.render import main
+from jbevo.data.pose_files import read_kitti
 from jbevo.data.synthetic.conditions import CONDITIONS
 from jbevo.data.synthetic.maps import render_map
-from jbevo.data.synthetic.sequences import kitti_sequence, procedural_sequence, small_camera
-from jbevo.cli.render import main
+from jbevo.data.synthetic.sequences import (
+    kitti_sequence,
+    procedural_sequence,
+    small_camera,
+)
 from jbevo.data.synthetic.world import World
-from jbevo.eval.pose_files import read_kitti
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.geometry.camera import Camera
 from jbevo.vision.bev import bev_project
@@ -83,7 +87,7 @@ def test_save_load_round_trip_and_bad_files(seq, tmp_path):
         data.load(path)
 
 
-def test_check_names_the_bad_field(seq):
+def test_check_names_the_bad_field(as_users_run, seq):
     bad = data.Sequence(seq.images[:-1], seq.frame_times, seq.imu_times, seq.gyro, seq.accel, seq.camera, seq.poses)
     with pytest.raises(ValueError, match="images"):
         data.check(bad)

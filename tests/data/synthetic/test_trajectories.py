@@ -6,12 +6,16 @@ import pytest
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
-from jbevo.inertial.kinematics import GRAVITY
-from jbevo.data.synthetic.imu import NOISELESS, simulate_imu
-from jbevo.geometry.euler import euler_zyx
 from jbevo.data.kitti_frames import CAMERA_HEIGHT
-from jbevo.data.synthetic.trajectories import kitti_drive, procedural_drive, speed_targets
-from jbevo.eval.pose_files import read_kitti
+from jbevo.data.pose_files import read_kitti
+from jbevo.data.synthetic.imu import NOISELESS, simulate_imu
+from jbevo.data.synthetic.trajectories import (
+    kitti_drive,
+    procedural_drive,
+    speed_targets,
+)
+from jbevo.geometry.euler import euler_zyx
+from jbevo.inertial.kinematics import GRAVITY
 
 
 def test_procedural_drive_is_deterministic_and_car_like():
@@ -58,7 +62,14 @@ def test_every_speed_target_is_written_and_a_long_stop_lasts_its_length():
 def _quat_rate(q, w):
     """d/dt of the quaternion (x, y, z, w) of R_world_body for body rate ``w``."""
     x, y, z, s = q
-    return 0.5 * np.array([s * w[0] + y * w[2] - z * w[1], s * w[1] + z * w[0] - x * w[2], s * w[2] + x * w[1] - y * w[0], -x * w[0] - y * w[1] - z * w[2]])
+    return 0.5 * np.array(
+        [
+            s * w[0] + y * w[2] - z * w[1],
+            s * w[1] + z * w[0] - x * w[2],
+            s * w[2] + x * w[1] - y * w[0],
+            -x * w[0] - y * w[1] - z * w[2],
+        ]
+    )
 
 
 def _integrate(imu, dt):

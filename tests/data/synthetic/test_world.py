@@ -38,7 +38,7 @@ def test_every_pyramid_level_matches_a_box_filtered_tile(world):
         v = y / (0.04 * 2**k) - 0.5 + 0.5 / 2**k
         iu, iv = np.floor(u).astype(int), np.floor(v).astype(int)
         fu, fv = u - iu, v - iv
-        t = lambda dr, dc: level[(iv + dr) % n, (iu + dc) % n]  # noqa: E731
+        t = lambda dr, dc, level=level, iv=iv, iu=iu, n=n: level[(iv + dr) % n, (iu + dc) % n]
         expected = (t(0, 0) * (1 - fu) + t(0, 1) * fu) * (1 - fv) + (t(1, 0) * (1 - fu) + t(1, 1) * fu) * fv
         got = world._level(*(jnp.asarray(a, jnp.float32) for a in ((x / 0.04) % 256, (y / 0.04) % 256)), jnp.full(500, k))
         np.testing.assert_allclose(np.asarray(got), expected, atol=2.5 / 255, err_msg=f"level {k}")

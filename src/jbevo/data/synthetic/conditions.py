@@ -117,3 +117,6 @@ def expose(image: Float[Array, "H W"], condition: Condition, key: PRNGKeyArray) 
     # Uniform noise of the same std: sampling it costs a third of a Gaussian (erfinv) per pixel.
     image = image + condition.noise * 3.4641016 * (jax.random.uniform(key, image.shape, image.dtype) - 0.5)
     return jnp.round(jnp.clip(image, 0.0, 1.0) * 255.0).astype(jnp.uint8)
+
+
+__all__ = ["CONDITIONS", "Condition", "Obstacles", "draw_obstacles", "expose", "place_obstacles"]

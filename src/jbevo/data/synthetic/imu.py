@@ -22,6 +22,8 @@ from jbevo.inertial.kinematics import GRAVITY
 
 # Body -> camera for KITTI camera 0 looking ahead (camera x = -body y, y = -body z, z = body x).
 _R_CAM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+
+
 @dataclass(frozen=True)
 class ImuNoise:
     """Continuous-time noise parameters (per sqrt(Hz)) and turn-on bias std."""
@@ -132,3 +134,6 @@ def _spline(t: np.ndarray, values: np.ndarray, smoothing: float | None):
     if smoothing is None:
         return CubicSpline(t, values)
     return _Spline([make_smoothing_spline(t, values[:, i], lam=smoothing) for i in range(values.shape[1])])
+
+
+__all__ = ["ADIS16448", "ImuData", "ImuNoise", "NOISELESS", "planar_body_velocity", "simulate_imu"]

@@ -13,6 +13,7 @@ no dynamic obstacles.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -75,3 +76,6 @@ def _smooth_field(rng: np.random.Generator, shape: tuple[int, int], scale_px: fl
     low = np.exp(-0.5 * (np.hypot(f0, f1) * scale_px) ** 2)
     out = np.real(np.fft.ifft2(np.fft.fft2(rng.standard_normal(shape)) * low))
     return out / (out.std() + 1e-12)
+
+
+__all__ = ["MAP_STYLES", "MapStyle", "render_map"]

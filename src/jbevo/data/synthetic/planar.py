@@ -70,3 +70,6 @@ def simulate_planar_sequence(
     dropped = jax.random.uniform(k_drop, (steps,)) < fix_dropout
     fixes = jnp.where(dropped[:, None], jnp.nan, fixes)
     return PlanarSequence(poses, increments, fixes)
+
+
+__all__ = ["PlanarSequence", "simulate_planar_sequence"]

@@ -36,9 +36,7 @@ def camera_rays(camera: Camera, rotation_world_body: Float[Array, "3 3"]) -> tup
     xc = (u - k[0, 2]) / k[0, 0]
     yc = (v - k[1, 2]) / k[1, 1]
     r_wc = rotation_world_body @ camera.rotation_body_to_camera.T
-    return (
-        r_wc[:, 0, None, None] * xc[None] + r_wc[:, 1, None, None] * yc[None] + r_wc[:, 2, None, None]
-    ), r_wc
+    return (r_wc[:, 0, None, None] * xc[None] + r_wc[:, 1, None, None] * yc[None] + r_wc[:, 2, None, None]), r_wc
 
 
 def render(
@@ -86,3 +84,6 @@ def render_batch(
     if poses.ndim != 3 or poses.shape[1:] != (4, 4):
         raise ValueError(f"poses must have shape (N, 4, 4), got {poses.shape}")
     return jax.lax.map(lambda pose: render(world, camera, pose, **kwargs), poses, batch_size=batch_size)
+
+
+__all__ = ["camera_rays", "render", "render_batch"]

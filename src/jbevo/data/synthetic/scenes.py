@@ -29,6 +29,7 @@ from jbevo.data.synthetic.trajectories import procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.bev_grid import BevGrid
 
+
 @dataclass(frozen=True)
 class SceneKind:
     """A platform, its map and the BEV grids that suit its camera height and speed."""
@@ -71,8 +72,13 @@ def scene_drive(kind: SceneKind | str, seed: int) -> tuple[np.ndarray, np.ndarra
 
 
 def scene(
-    kind: SceneKind | str = "carla", town: str = "town01", condition: str = "day", part: str = "all", seed: int = 0,
-    world: World | None = None, frames: int | None = None,
+    kind: SceneKind | str = "carla",
+    town: str = "town01",
+    condition: str = "day",
+    part: str = "all",
+    seed: int = 0,
+    world: World | None = None,
+    frames: int | None = None,
 ) -> Scene:
     """Render ``part`` of the drive ``seed`` of ``kind`` in ``town`` under ``condition``, and its
     map. ``frames`` overrides the drive's length (tests, notebooks)."""
@@ -85,7 +91,9 @@ def scene(
     times, poses = scene_drive(kind, seed)
     start, stop = part_range(kind.frames, part)
     # Poses [start, stop] (one more: the frame before the part starts its IMU).
-    seq = make_sequence(world, small_camera(height=kind.height), times[start : stop + 1], poses[start : stop + 1], condition, seed=seed)
+    seq = make_sequence(
+        world, small_camera(height=kind.height), times[start : stop + 1], poses[start : stop + 1], condition, seed=seed
+    )
     map_ = render_map(world, poses[start : stop + 1, :2, 3], kind.map_resolution, style=kind.map_style, seed=seed + 1)
     return Scene(f"{kind.name}_{town}_{condition}_{part}_s{seed}", seq, map_)
 

@@ -20,8 +20,8 @@ from jbevo.data.synthetic.imu import ADIS16448, ImuNoise, simulate_imu
 from jbevo.data.synthetic.render import render
 from jbevo.data.synthetic.trajectories import kitti_drive, procedural_drive
 from jbevo.data.synthetic.world import World
-from jbevo.geometry.euler import rotation_zyx
 from jbevo.geometry.camera import Camera
+from jbevo.geometry.euler import rotation_zyx
 
 
 def small_camera(scale: float = 1 / 3, height: float = 1.65) -> Camera:
@@ -99,8 +99,13 @@ def make_sequence(
 
 
 def procedural_sequence(
-    seed: int, frames: int, town: str = "town01", camera: Camera | None = None, condition: Condition | str = "day",
-    imu_noise: ImuNoise = ADIS16448, world: World | None = None,
+    seed: int,
+    frames: int,
+    town: str = "town01",
+    camera: Camera | None = None,
+    condition: Condition | str = "day",
+    imu_noise: ImuNoise = ADIS16448,
+    world: World | None = None,
 ) -> Sequence:
     """A procedural drive of ``frames`` frames (10 Hz) in ``town``."""
     world = World.create(town) if world is None else world
@@ -110,12 +115,18 @@ def procedural_sequence(
 
 
 def kitti_sequence(
-    kitti_poses: np.ndarray, start: int = 0, frames: int | None = None, town: str = "town01",
-    camera: Camera | None = None, condition: Condition | str = "day", imu_noise: ImuNoise = ADIS16448,
-    seed: int = 0, world: World | None = None,
+    kitti_poses: np.ndarray,
+    start: int = 0,
+    frames: int | None = None,
+    town: str = "town01",
+    camera: Camera | None = None,
+    condition: Condition | str = "day",
+    imu_noise: ImuNoise = ADIS16448,
+    seed: int = 0,
+    world: World | None = None,
 ) -> Sequence:
     """The synthetic world driven by real KITTI motion (``T_world_cam0`` poses, e.g. read with
-    :func:`jbevo.eval.pose_files.read_kitti`): frames ``[start, start + frames)`` (all by default)."""
+    :func:`jbevo.data.pose_files.read_kitti`): frames ``[start, start + frames)`` (all by default)."""
     world = World.create(town) if world is None else world
     camera = Camera.kitti() if camera is None else camera
     times, poses = kitti_drive(kitti_poses)
@@ -130,3 +141,6 @@ def builtin_dataset(frames: int = 120, sequences: int = 6, town: str = "town01",
     camera, ADIS16448 IMU, day; seeds ``seed, seed + 1, ...``."""
     world = World.create(town)
     return [procedural_sequence(seed + i, frames, town, world=world) for i in range(sequences)]
+
+
+__all__ = ["builtin_dataset", "kitti_sequence", "make_sequence", "procedural_sequence", "small_camera"]

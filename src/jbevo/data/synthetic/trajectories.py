@@ -13,6 +13,7 @@ from scipy.ndimage import gaussian_filter1d
 from jbevo.data.kitti_frames import CAMERA_HEIGHT, body_poses_from_kitti
 from jbevo.geometry.euler import euler_zyx, poses_from_euler
 
+
 def _oscillation(rng, n, dt, frequency, damping, std):
     """A suspension mode: narrow-band motion around ``frequency`` (Hz), the sum of eight
     sinusoids with random phases and frequencies spread by the mode's ``damping`` (a lightly
@@ -78,7 +79,9 @@ def procedural_drive(
     speed = gaussian_filter1d(speed, 0.5 / dt, mode="nearest")  # smooth the jerk
     curvature = gaussian_filter1d(rng.standard_normal(n), 2.0 / dt, mode="wrap") * 0.6
     curvature = np.clip(curvature, -1 / 7.0, 1 / 7.0)
-    curvature = np.clip(curvature, -max_lateral_accel / np.maximum(speed, 1.0) ** 2, max_lateral_accel / np.maximum(speed, 1.0) ** 2)
+    curvature = np.clip(
+        curvature, -max_lateral_accel / np.maximum(speed, 1.0) ** 2, max_lateral_accel / np.maximum(speed, 1.0) ** 2
+    )
     yaw = np.cumsum(speed * curvature) * dt
     yaw -= yaw[0]
     x = np.cumsum(speed * np.cos(yaw)) * dt
@@ -97,7 +100,10 @@ def procedural_drive(
 
 
 def kitti_drive(
-    kitti_poses: np.ndarray, frame_rate: float = 10.0, grade_window_s: float = 2.0, height_window_s: float = 0.5,
+    kitti_poses: np.ndarray,
+    frame_rate: float = 10.0,
+    grade_window_s: float = 2.0,
+    height_window_s: float = 0.5,
     height: float = CAMERA_HEIGHT,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Real car motion from KITTI ground truth (``T_world_cam0``, ``(N, 4, 4)``) on the planar
@@ -122,3 +128,6 @@ def kitti_drive(
     z = body[:, 2, 3] - gaussian_filter1d(body[:, 2, 3], height_window_s * frame_rate, mode="nearest") + height
     position = np.stack([body[:, 0, 3], body[:, 1, 3], z], -1)
     return np.arange(len(body)) / frame_rate, poses_from_euler(euler, position)
+
+
+__all__ = ["kitti_drive", "procedural_drive", "speed_targets"]

@@ -236,3 +236,6 @@ class World(eqx.Module):
         rows = jnp.arange(shape[0], dtype=jnp.float32)[:, None]
         cols = jnp.arange(shape[1], dtype=jnp.float32)[None, :]
         return self.sample(origin[0] + cols * resolution, origin[1] + rows * resolution, resolution)
+
+
+__all__ = ["TOWNS", "Town", "World", "make_tile"]

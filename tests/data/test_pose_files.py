@@ -2,30 +2,30 @@
 
 import numpy as np
 import pytest
-from jbevo.eval import pose_files as tio
 
+from jbevo.data import pose_files
 
 
 def random_poses(n: int, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     q = rng.normal(size=(n, 4))
     poses = np.tile(np.eye(4), (n, 1, 1))
-    poses[:, :3, :3] = tio.quaternion_to_matrix(q)
+    poses[:, :3, :3] = pose_files.quaternion_to_matrix(q)
     poses[:, :3, 3] = rng.normal(size=(n, 3)) * 100
     return poses
 
 
 def test_kitti_round_trip_12_and_13_columns(tmp_path):
     poses = random_poses(20)
-    tio.write_kitti(tmp_path / "a.txt", poses)
-    back = tio.read_poses(tmp_path / "a.txt")
+    pose_files.write_kitti(tmp_path / "a.txt", poses)
+    back = pose_files.read_poses(tmp_path / "a.txt")
     np.testing.assert_allclose(back.poses, poses, atol=1e-6)
     np.testing.assert_array_equal(back.frame_index, np.arange(20))
-    tio.write_kitti(tmp_path / "b.txt", poses[5:], frame_index=np.arange(5, 20))
+    pose_files.write_kitti(tmp_path / "b.txt", poses[5:], frame_index=np.arange(5, 20))
     assert len((tmp_path / "b.txt").read_text().splitlines()[0].split()) == 13
-    late = tio.read_kitti(tmp_path / "b.txt")
+    late = pose_files.read_kitti(tmp_path / "b.txt")
     np.testing.assert_array_equal(late.frame_index, np.arange(5, 20))
-    gt, est, valid = tio.match_frames(back, late)
+    gt, est, valid = pose_files.match_frames(back, late)
     assert valid.sum() == 15 and not valid[:5].any()
     np.testing.assert_allclose(est[5:], poses[5:], atol=1e-6)
 
@@ -33,25 +33,25 @@ def test_kitti_round_trip_12_and_13_columns(tmp_path):
 def test_tum_round_trip_and_quaternion_convention(tmp_path):
     poses = random_poses(30, seed=1)
     times = 1.0 + 0.1 * np.arange(30)
-    tio.write_tum(tmp_path / "t.txt", times, poses)
-    back = tio.read_poses(tmp_path / "t.txt")
+    pose_files.write_tum(tmp_path / "t.txt", times, poses)
+    back = pose_files.read_poses(tmp_path / "t.txt")
     np.testing.assert_allclose(back.poses, poses, atol=1e-8)
     np.testing.assert_allclose(back.timestamps, times)
     # Scalar-last Hamilton: a 90 deg turn about z is (0, 0, sin 45, cos 45).
     rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    np.testing.assert_allclose(tio.matrix_to_quaternion(rz), [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-12)
+    np.testing.assert_allclose(pose_files.matrix_to_quaternion(rz), [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-12)
     # All four branches of the conversion (w, x, y, z largest) round-trip.
     for q in ([0, 0, 0, 1], [1, 0, 0, 0], [0, 1, 0, 0.01], [0, 0.1, 1, 0]):
         q = np.asarray(q, float) / np.linalg.norm(q)
-        r = tio.quaternion_to_matrix(q)
-        np.testing.assert_allclose(tio.quaternion_to_matrix(tio.matrix_to_quaternion(r)), r, atol=1e-12)
+        r = pose_files.quaternion_to_matrix(q)
+        np.testing.assert_allclose(pose_files.quaternion_to_matrix(pose_files.matrix_to_quaternion(r)), r, atol=1e-12)
 
 
 def test_planar_trajectories_round_trip(tmp_path):
     xy_yaw = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.3], [2.0, 1.5, -3.0]])
-    tio.write_tum(tmp_path / "p.txt", np.arange(3.0), xy_yaw)
-    back = tio.read_tum(tmp_path / "p.txt")
-    np.testing.assert_allclose(tio.to_planar(back.poses), xy_yaw, atol=1e-9)
+    pose_files.write_tum(tmp_path / "p.txt", np.arange(3.0), xy_yaw)
+    back = pose_files.read_tum(tmp_path / "p.txt")
+    np.testing.assert_allclose(pose_files.to_planar(back.poses), xy_yaw, atol=1e-9)
     np.testing.assert_allclose(back.poses[:, 2, 3], 0.0)
 
 
@@ -72,31 +72,31 @@ def test_malformed_files_name_the_line(tmp_path, text, message):
     path = tmp_path / "bad.txt"
     path.write_text(text)
     with pytest.raises(ValueError, match=message):
-        tio.read_poses(path)
+        pose_files.read_poses(path)
 
 
 def test_missing_file_and_failed_write_keep_the_old_file(tmp_path):
     with pytest.raises(FileNotFoundError, match="pose file not found"):
-        tio.read_poses(tmp_path / "nope.txt")
+        pose_files.read_poses(tmp_path / "nope.txt")
     path = tmp_path / "keep.txt"
-    tio.write_kitti(path, random_poses(3))
+    pose_files.write_kitti(path, random_poses(3))
     before = path.read_text()
     bad = random_poses(3)
     bad[1, 0, 3] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        tio.write_kitti(path, bad)
+        pose_files.write_kitti(path, bad)
     with pytest.raises(ValueError, match="timestamps must have shape"):
-        tio.write_tum(path, np.arange(2.0), random_poses(3))
+        pose_files.write_tum(path, np.arange(2.0), random_poses(3))
     assert path.read_text() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.txt"]
 
 
 def test_matching_rejects_mixed_formats_and_unknown_frames(tmp_path):
-    kitti = tio.Trajectory(random_poses(5), np.arange(5), None)
-    tum = tio.Trajectory(random_poses(5), None, np.arange(5.0))
+    kitti = pose_files.Trajectory(random_poses(5), np.arange(5), None)
+    tum = pose_files.Trajectory(random_poses(5), None, np.arange(5.0))
     with pytest.raises(ValueError, match="cannot match"):
-        tio.match_frames(kitti, tum)
+        pose_files.match_frames(kitti, tum)
     with pytest.raises(ValueError, match="frame indices up to 7"):
-        tio.match_frames(kitti, tio.Trajectory(random_poses(2), np.array([1, 7]), None))
+        pose_files.match_frames(kitti, pose_files.Trajectory(random_poses(2), np.array([1, 7]), None))
     with pytest.raises(ValueError, match="no ground truth within"):
-        tio.match_frames(tum, tio.Trajectory(random_poses(1), None, np.array([2.5])))
+        pose_files.match_frames(tum, pose_files.Trajectory(random_poses(1), None, np.array([2.5])))

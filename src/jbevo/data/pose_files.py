@@ -56,7 +56,7 @@ def _as_poses(poses: np.ndarray, name: str = "poses") -> np.ndarray:
 # ----------------------------------------------------------------------------- reading
 
 
-def _parse_rows(path: Path) -> list[tuple[int, list[float]]]:
+def _parse_rows(path: str | Path) -> list[tuple[int, list[float]]]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"pose file not found: {path}")
@@ -141,9 +141,7 @@ def read_poses(path: str | Path) -> Trajectory:
     raise ValueError(f"{path}:{rows[0][0]}: expected 12 or 13 (KITTI) or 8 (TUM) numbers, got {width}")
 
 
-def match_frames(
-    gt: Trajectory, est: Trajectory, tolerance_s: float = 1e-3
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def match_frames(gt: Trajectory, est: Trajectory, tolerance_s: float = 1e-3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pair an estimate with its ground truth: by frame index (KITTI) or timestamp (TUM).
 
     Returns ``(gt (N, 4, 4), est (N, 4, 4), valid (N,))`` over the ground-truth frames, the estimate
@@ -157,7 +155,9 @@ def match_frames(
         pos = np.searchsorted(gt.frame_index, est.frame_index)
     elif gt.timestamps is not None and est.timestamps is not None:
         pos = np.clip(np.searchsorted(gt.timestamps, est.timestamps), 1, n - 1)
-        pos = np.where(np.abs(gt.timestamps[pos - 1] - est.timestamps) < np.abs(gt.timestamps[pos] - est.timestamps), pos - 1, pos)
+        pos = np.where(
+            np.abs(gt.timestamps[pos - 1] - est.timestamps) < np.abs(gt.timestamps[pos] - est.timestamps), pos - 1, pos
+        )
         far = np.abs(gt.timestamps[pos] - est.timestamps) > tolerance_s
         if np.any(far):
             raise ValueError(f"estimate timestamp {est.timestamps[np.argmax(far)]} has no ground truth within {tolerance_s} s")
@@ -200,3 +200,16 @@ def write_tum(path: str | Path, timestamps: np.ndarray, poses: np.ndarray) -> No
     lines = ["# timestamp tx ty tz qx qy qz qw"]
     lines += [" ".join(f"{v:.9f}" for v in (ts, *ti, *qi)) for ts, ti, qi in zip(timestamps, t, q)]
     write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+__all__ = [
+    "Trajectory",
+    "match_frames",
+    "planar_to_poses",
+    "read_kitti",
+    "read_poses",
+    "read_tum",
+    "to_planar",
+    "write_kitti",
+    "write_tum",
+]
