@@ -326,3 +326,19 @@ def test_rotation_prior_searches_near_it_and_picks_the_half_turn(gravel):
     assert np.degrees(angle_diff(flipped.rotation, 0.05 - np.pi)) < 0.1
     batch = register(jnp.stack([jnp.float32(a)] * 2), jnp.stack([jnp.float32(b)] * 2), rotation_prior=jnp.float32([0.06, 0.04]))
     assert batch.rotation.shape == (2,)
+
+
+def test_noise_power_estimates_white_noise_and_ignores_smooth_content():
+    """The noise floor DPC's rotation spectrum adds is the power white noise gives a spectrum bin
+    (sigma^2 times the window's energy), whether or not the image also holds smooth content."""
+    from jbevo.vision.phase_correlation import disk_window, noise_power, windowed
+
+    rng = np.random.default_rng(0)
+    window = disk_window((128, 128))
+    smooth = np.add.outer(np.sin(np.arange(128) / 9.0), np.cos(np.arange(128) / 13.0))
+    for sigma in (0.01, 0.05):
+        for content in (0.0, 1.0):
+            image = jnp.float32(content * smooth + rng.normal(0, sigma, (128, 128)))
+            spectrum = jnp.fft.rfft2(windowed(image, window))
+            expected = sigma**2 * float(jnp.sum(window**2))
+            assert float(noise_power(spectrum, (128, 128))) == pytest.approx(expected, rel=0.1)
