@@ -24,7 +24,7 @@ attitude at frame 0.
 ``diagnostic_rmse_deg_fitted_on_test`` holds, for the DUKF, the DUKF + gyro bias and the
 motion-compensated filter, the RMSE on 09 and 10 after fitting Q and R (Adam, same steps) on
 the whole of 09 and 10 themselves: not a result, but about the best the filter's structure reaches
-on those drives, to tell a target the structure cannot meet from one that training misses.
+on those drives, to tell an accuracy the structure cannot reach from one that training misses.
 
 ``rmse_deg_accel_bias_tilt`` is the RMS of the tilt that the simulated accelerometer's bias
 (random walk from zero, EuRoC's 3.0e-3 m/s^3/sqrt(Hz)) fakes on 09 and 10: an error that is

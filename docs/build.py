@@ -10,7 +10,7 @@ A page marks a generated table as::
     <!-- /table -->
 
 and a generated number inside a sentence as ``<!-- value: NAME -->...<!-- /value -->``; NAME is
-a key of :data:`TABLES` or :data:`VALUES` (functions of the records in :mod:`docs.records`).
+a key of :data:`TABLES` or :data:`VALUES` (functions of the records in ``docs/tables.py``).
 Nothing between the markers is written by hand: the records are written by the committed
 benchmark and experiment scripts, and this script turns them into text.
 """
@@ -24,7 +24,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from tables import TABLES, VALUES  # noqa: E402
+from tables import TABLES, VALUES
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

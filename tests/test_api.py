@@ -26,7 +26,18 @@ ALLOWED = {
     "models": {"geometry", "filtering", "data", "data.synthetic", "vision", "inertial"},
     "eval": {"geometry", "filtering", "data", "vision", "inertial", "models"},
     "training": {"geometry", "filtering", "data", "vision", "inertial", "models", "eval"},
-    "cli": {"geometry", "filtering", "data", "data.synthetic", "data.catalog", "vision", "inertial", "models", "eval", "training"},
+    "cli": {
+        "geometry",
+        "filtering",
+        "data",
+        "data.synthetic",
+        "data.catalog",
+        "vision",
+        "inertial",
+        "models",
+        "eval",
+        "training",
+    },
     "shim": {"cli"},
 }
 UTILITIES = {"files", "progress"}

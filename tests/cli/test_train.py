@@ -18,6 +18,8 @@ TINY = [
     "24",
     "--window",
     "12",
+    "--start",
+    "warm",
     "--val-window",
     "12",
     "--batch",
@@ -44,6 +46,23 @@ def test_train_writes_metrics_and_checkpoints(run_dir, capsys):
     # 24 frames hold no 10 m segment: no t_err, not a zero
     assert metrics["before"]["segments"] == 0 and metrics["before"]["t_err_pct"] is None
     assert (run_dir / "best.ckpt").is_file() and (run_dir / "last.ckpt").is_file()
+
+
+def test_the_default_run_trains_and_validates_whole_drives_from_a_cold_start(tmp_path, capsys):
+    """The defaults train on whole drives started cold and select on whole validation drives run
+    the same way; the hand-set parameters are the first candidate."""
+    out = tmp_path / "whole"
+    assert (
+        train.main(["--sequences", "2", "--frames", "16", "--epochs", "2", "--grid", "0.1", "64", "7.5", "--out", str(out)]) == 0
+    )
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["validation"] == "whole sequences, cold start"
+    assert metrics["best_epoch"] in (0, 1, 2) and len(metrics["history"]) == 2
+    text = capsys.readouterr().out
+    assert f"best checkpoint, epoch {metrics['best_epoch']}" in text
+    assert ("best.ckpt holds them" in text) == (metrics["best_epoch"] == 0)
+    best_t_err = min([metrics["before"]["ate_m"]] + [h["val_ate_m"] for h in metrics["history"]])
+    assert metrics["after"]["ate_m"] == best_t_err  # 16 frames hold no segment: ATE selects
 
 
 def test_resume_continues_from_the_last_epoch(run_dir, capsys):

@@ -77,7 +77,7 @@ def test_learnable_parameters_and_sources():
 
 
 def test_gradient_of_the_loss_matches_finite_differences(float64, world):
-    """Every learnable leaf, central differences in float64 (the test session enables x64; the
+    """Every learnable leaf, central differences in float64 (the ``float64`` fixture; the
     model then computes in float64). The loss has kinks where a correlation peak changes its
     integer position, so the step is small (1e-5)."""
     assert jnp.result_type(float) == jnp.float64

@@ -127,10 +127,16 @@ def seed_option(default: int = 0, help: str = "random seed") -> argparse.Argumen
     return p
 
 
-def optimizer_options(lr: float, epochs: int, window: int, batch: int) -> argparse.ArgumentParser:
-    """A parent parser with the training loop's options (:mod:`jbevo.training.loop`)."""
+def optimizer_options(lr: float, epochs: int, window: int, batch: int, whole: bool = False) -> argparse.ArgumentParser:
+    """A parent parser with the training loop's options (:mod:`jbevo.training.loop`); with
+    ``whole``, ``--window 0`` trains on whole sequences."""
     p = argparse.ArgumentParser(add_help=False)
-    p.add_argument("--window", type=positive_int, default=window, help="training window length (frames)")
+    if whole:
+        p.add_argument(
+            "--window", type=non_negative_int, default=window, help="training window length (frames; 0: whole sequences)"
+        )
+    else:
+        p.add_argument("--window", type=positive_int, default=window, help="training window length (frames)")
     p.add_argument("--batch", type=positive_int, default=batch, help="windows per step (vmapped)")
     p.add_argument("--epochs", type=positive_int, default=epochs)
     p.add_argument("--lr", type=positive_float, default=lr, help="Adam learning rate (the parameters are logs)")

@@ -86,6 +86,10 @@ def train(args: argparse.Namespace) -> int:
     )
     before = validate_localization(localization_model(args.kind), val_scene.sequence, val_scene.map)
     _print("validation before training (hand-set)", before)
+    if progress_["epoch"] == 0:
+        # The hand-set parameters are the first candidate: a learned checkpoint replaces them
+        # only where it validates better.
+        save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", before["mean_position_error_m"])
 
     seq = train_scene.sequence
     if seq.num_frames < args.window:
@@ -117,9 +121,12 @@ def train(args: argparse.Namespace) -> int:
         save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", val["mean_position_error_m"])
 
     with common.reading(f"{args.out / 'best.ckpt'}"):
-        best_model = checkpoint.load(args.out / "best.ckpt")[0] if (args.out / "best.ckpt").is_file() else model
+        best_model, _, best_progress = checkpoint.load(args.out / "best.ckpt")
+    best_epoch = best_progress.get("best_epoch", 0)
     after = validate_localization(best_model, val_scene.sequence, val_scene.map)
-    _print("validation after training (best checkpoint)", after)
+    _print(f"validation after training (best checkpoint, epoch {best_epoch})", after)
+    if best_epoch == 0:
+        print("no epoch validated better than the hand-set parameters: best.ckpt holds them")
     write_json_atomic(
         args.out / "metrics.json",
         {
@@ -128,6 +135,7 @@ def train(args: argparse.Namespace) -> int:
             "condition": args.condition,
             "before": before,
             "after": after,
+            "best_epoch": best_epoch,
             "learnable_parameters": model.num_learnable(),
             "epochs": progress_["epoch"],
             "history": progress_["history"],

@@ -1,19 +1,22 @@
 """Train BEVO's parameters with optax through ``jax.grad`` of the whole recursion.
 
     python -m jbevo.train                       # built-in synthetic drives, ~2 min on 2 cores
-    python -m jbevo.train --dataset kitti-synthetic --kitti-poses $JBEVO_REFERENCE_DATA/kitti_odom/gt_poses
-    python -m jbevo.train --dataset kitti --kitti-root /data/kitti/odometry --train 00 01 --val 09
+    python -m jbevo.train --dataset kitti-synthetic --kitti-poses $JBEVO_REFERENCE_DATA/kitti_odom/gt_poses \
+        --window 96 --start warm --val-start warm
+    python -m jbevo.train --dataset kitti --kitti-root /data/kitti/odometry --train 00 01 --val 09 --window 96 --start warm
 
-Windows of ``--window`` frames (stride half a window) are cut from the training sequences and
-shuffled into batches of ``--batch`` (vmapped); each window starts warm (the truth's attitude and
-speed at its first frame); the loss is :func:`jbevo.models.losses.motion_loss` averaged over the
-batch. After every epoch the model runs over the validation sequences, cut into windows of
-``--val-window`` frames like the training data (``--val-window 0``: whole sequences from a cold
-start; with windows, the whole sequences are also scored at the end);
-``OUT/best.ckpt`` keeps the best validation ``t_err_pct`` (ATE where the validation drives are
-too short for any segment) and ``OUT/last.ckpt`` the latest state
-(both atomic); ``--resume`` continues from ``OUT/last.ckpt``. The validation metrics before and
-after training are printed and written to ``OUT/metrics.json``.
+Training runs on windows of ``--window`` frames (stride half a window; 0, the default: the whole
+sequences), shuffled into batches of ``--batch`` (vmapped), each started from a cold start (the
+IMU alone, as a drive from rest; the default) or warm (``--start warm``: the truth's attitude and
+speed at its first frame, as if the filter had run before: for windows cut from the middle of a
+drive); the loss is :func:`jbevo.models.losses.motion_loss` averaged over the batch. After every
+epoch the model runs over the validation sequences the way they are scored: whole, from a cold
+start (``--val-start warm`` for warm), or cut into warm-started windows of ``--val-window``
+frames. The hand-set parameters are the first candidate; ``OUT/best.ckpt`` keeps whichever
+validates best (``t_err_pct``, or ATE where the validation drives are too short for any segment)
+and ``OUT/last.ckpt`` the latest state (both atomic); ``--resume`` continues from
+``OUT/last.ckpt``. The validation metrics before and after training are printed and written to
+``OUT/metrics.json``.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo.cli import common
+from jbevo.data import sequence as sq
 from jbevo.data import splits
 from jbevo.data.catalog import load_sequences
 from jbevo.data.sequence import Sequence
@@ -69,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
         [
             common.dataset_options(default_frames=120),
             common.grid_option(DEFAULT_GRID),
-            common.optimizer_options(lr=0.03, epochs=8, window=32, batch=4),
+            common.optimizer_options(lr=0.03, epochs=24, window=0, batch=4, whole=True),
             common.seed_option(),
         ],
     )
@@ -79,10 +83,22 @@ def build_parser() -> argparse.ArgumentParser:
         "--sequences", type=common.positive_int, default=5, help="number of built-in synthetic drives (one fifth validate)"
     )
     p.add_argument(
+        "--start",
+        choices=("warm", "cold"),
+        default="cold",
+        help="training windows start from the IMU alone (cold, as a drive from rest) or from the truth's attitude and speed (warm)",
+    )
+    p.add_argument(
         "--val-window",
         type=common.non_negative_int,
-        default=40,
-        help="validate on windows of this many frames, warm-started like training (0: whole sequences, cold start)",
+        default=0,
+        help="validate on windows of this many frames, warm-started (0: whole sequences, started as --val-start)",
+    )
+    p.add_argument(
+        "--val-start",
+        choices=("cold", "warm"),
+        default="cold",
+        help="how whole validation sequences start (the scored run: cold from rest, or warm from the truth)",
     )
     p.add_argument(
         "--bands",
@@ -106,20 +122,26 @@ def train(args: argparse.Namespace) -> int:
         model, params, static, optimizer, opt_state, progress = start_run(
             Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
         )
-        windows = training_windows(train_seqs, args.window)
+        windows = sq.stack(train_seqs) if args.window == 0 else training_windows(train_seqs, args.window)
     print(
         f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
         f"({args.dataset}); segment lengths {list(lengths)} m"
     )
 
     hand_set = Bevo.create(model.grid, imu_dt, bands=model.bands is not None)
-    before = validate(hand_set, val_seqs, lengths, args.val_window)
+    val_warm = args.val_start == "warm"
+    before = validate(hand_set, val_seqs, lengths, args.val_window, val_warm)
     print(f"validation before training (hand-set): {format_scores(before)}")
+    if progress["epoch"] == 0:
+        # The hand-set parameters are the first candidate: a learned checkpoint replaces them
+        # only where it validates better.
+        save_epoch(args.out, hand_set, opt_state, progress, "best_t_err_pct", criterion(before))
+    warm = args.start == "warm"
 
     def loss(m, batch):
-        # Windows start mid-drive: warm-started from the truth at their first frame, as if the
-        # filter had run before (see Bevo.__call__).
-        out = jax.vmap(lambda q: m(q, warm_start=True))(batch)
+        # A warm window starts from the truth at its first frame, as if the filter had run
+        # before (Bevo.__call__); a cold one from the IMU alone, as a drive from rest does.
+        out = jax.vmap(lambda q: m(q, warm_start=warm))(batch)
         return jnp.mean(jax.vmap(lambda o, s: motion_loss(o, s, args.yaw_weight))(out, batch))
 
     step = make_step(static, optimizer, loss)
@@ -132,7 +154,7 @@ def train(args: argparse.Namespace) -> int:
         except TrainingDiverged as error:
             raise common.CommandError(str(error)) from None
         model = eqx.combine(params, static)
-        val = validate(model, val_seqs, lengths, args.val_window)
+        val = validate(model, val_seqs, lengths, args.val_window, val_warm)
         progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
         progress["history"].append(
             {"epoch": epoch + 1, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]}
@@ -141,21 +163,28 @@ def train(args: argparse.Namespace) -> int:
         save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion(val))
 
     with common.reading(f"{args.out / 'best.ckpt'}"):
-        best = checkpoint.load(args.out / "best.ckpt")[0] if (args.out / "best.ckpt").is_file() else model
-    after = validate(best, val_seqs, lengths, args.val_window)
-    print(f"validation after training (best checkpoint): {format_scores(after)}")
+        best, _, best_progress = checkpoint.load(args.out / "best.ckpt")
+    best_epoch = best_progress.get("best_epoch", 0)
+    after = validate(best, val_seqs, lengths, args.val_window, val_warm)
+    print(f"validation after training (best checkpoint, epoch {best_epoch}): {format_scores(after)}")
+    if best_epoch == 0:
+        print("no epoch validated better than the hand-set parameters: best.ckpt holds them")
     whole = {}
     if args.val_window:
-        whole = {"hand_set": validate(hand_set, val_seqs, lengths), "learned": validate(best, val_seqs, lengths)}
-        print(f"whole validation sequences from a cold start, hand-set: {format_scores(whole['hand_set'])}")
-        print(f"whole validation sequences from a cold start, learned:  {format_scores(whole['learned'])}")
+        whole = {
+            "hand_set": validate(hand_set, val_seqs, lengths, 0, val_warm),
+            "learned": validate(best, val_seqs, lengths, 0, val_warm),
+        }
+        print(f"whole validation sequences ({args.val_start} start), hand-set: {format_scores(whole['hand_set'])}")
+        print(f"whole validation sequences ({args.val_start} start), learned:  {format_scores(whole['learned'])}")
     write_json_atomic(
         args.out / "metrics.json",
         {
             "dataset": args.dataset,
             "validation": f"windows of {args.val_window} frames, warm start"
             if args.val_window
-            else "whole sequences, cold start",
+            else f"whole sequences, {args.val_start} start",
+            "best_epoch": best_epoch,
             "before": before,
             "after": after,
             "whole_sequences": whole,

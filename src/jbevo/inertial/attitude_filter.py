@@ -6,7 +6,7 @@ bias ``(bx, by, bz)`` (rad/s, random walk). One filter step per camera frame:
 * **Motion**: integrate the gyro samples between the two frames with the exact ZYX Euler-rate
   kinematics, ``pitch' = cos(roll) wy - sin(roll) wz`` and
   ``roll' = wx + tan(pitch) (sin(roll) wy + cos(roll) wz)`` (forward Euler per IMU sample). The
-  seed's ``[w_pitch, w_roll] * dt`` ignores the coupling through roll and the yaw rate; in a turn
+  plain ``[w_pitch, w_roll] * dt`` ignores the coupling through roll and the yaw rate; in a turn
   at 2 deg of roll it mistakes 3.5 % of the yaw rate for pitch rate.
 * **Measurement**: the tilt of the mean specific force over the frame's samples,
   ``pitch = -atan2(ax, sqrt(ay^2 + az^2))``, ``roll = atan2(ay, az)``. The accelerometer also feels

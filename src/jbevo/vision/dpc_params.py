@@ -11,7 +11,7 @@ from jaxtyping import Array, Float
 class DPCParams(eqx.Module):
     """The learnable parameters of DPC (array leaves) and its static settings.
 
-    The defaults meet the accuracy targets of ``benchmarks/registration.py`` without training.
+    The defaults were chosen on the tuning photos of ``benchmarks/registration.py`` (no training).
     Widths and temperatures are stored as logs so that gradient steps keep them positive.
 
     Attributes:

@@ -4,7 +4,6 @@ log-domain soft-argmax that finds their peaks to a fraction of a sample. Pure JA
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.ndimage import map_coordinates
@@ -40,7 +39,8 @@ def noise_power(spectrum: Array, shape: tuple[int, int]) -> Array:
     """The power ``|F|^2`` of white noise in an ``rfft2`` spectrum of an image of ``shape`` (its
     padded size): the median power of the bins at least :data:`NOISE_BAND` cycles per pixel from
     the origin, where images hold little of their own energy, over ``ln 2`` (the median of an
-    exponential variable). An estimate, not a learnable quantity: no gradient flows through it."""
+    exponential variable). Differentiable almost everywhere (through the median sample), so that
+    gradients through DPC see how the floor follows the image."""
     fy = np.fft.fftfreq(shape[0])[:, None]
     fx = np.fft.rfftfreq(shape[1])[None, :]
     outer = np.flatnonzero(np.broadcast_to(np.hypot(fy, fx) >= NOISE_BAND, spectrum.shape))
@@ -49,7 +49,7 @@ def noise_power(spectrum: Array, shape: tuple[int, int]) -> Array:
     outer = outer[:: max(1, len(outer) // NOISE_SAMPLES)]
     flat = spectrum.reshape(-1)[outer]
     power = jnp.real(flat) ** 2 + jnp.imag(flat) ** 2
-    return jax.lax.stop_gradient(jnp.median(power) / np.log(2.0))
+    return jnp.median(power) / np.log(2.0)
 
 
 def disk_window(shape: tuple[int, int], taper: float = 0.5, dtype=jnp.float32) -> Float[Array, "H W"]:
@@ -130,7 +130,9 @@ def log_polar_spectrum(image: Float[Array, "H W"], params: DPCParams) -> Float[A
     # The magnitude the image's own noise gives, added inside the log: where the noise
     # dominates (high radii of a smooth image) log |F| is nearly flat along the angle and adds
     # little to the rotation's correlation, instead of the noise's fluctuations.
-    floor = _TEXTURE_FLOOR * (h * w) ** 0.5 + jnp.sqrt(noise_power(spectrum, (ph, pw)))
+    # (The clamp keeps the square root's gradient finite where a featureless image has none.)
+    noise = jnp.sqrt(jnp.maximum(noise_power(spectrum, (ph, pw)), _PEAK_MIN))
+    floor = _TEXTURE_FLOOR * (h * w) ** 0.5 + noise
     return jnp.log(_safe_norm(re, im) + floor)
 
 

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Regenerate every committed record (benchmarks/results/*.json, experiments/results/*.json), then
+# the measured tables of the README and docs/ from them. Needs the bench extra
+# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about two hours on
+# a 2-core CPU. Timings are of this machine: run nothing else beside it.
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+: "${JBEVO_REFERENCE_DATA:?set JBEVO_REFERENCE_DATA to the reference-data folder}"
+
+python benchmarks/ukf.py
+python benchmarks/registration.py
+python benchmarks/bev.py
+python benchmarks/simulator.py
+python benchmarks/bevo.py
+python benchmarks/attitude.py
+python experiments/filtering_demo.py
+python experiments/reference_metrics.py
+python experiments/bands.py
+python experiments/builtin_training.py
+python experiments/kitti_odometry.py
+python experiments/localization.py
+python docs/build.py
