@@ -2,7 +2,7 @@
 
 IMU at 100 Hz from the KITTI odometry ground-truth poses of sequences 00-10 (10 Hz taken as
 exactly 0.1 s; positions and Euler angles fitted with smoothing splines, see
-``jbevo.datasets.imu``), EuRoC ADIS16448 noise plus a turn-on gyro bias, one seed per sequence.
+``jbevo.data.synthetic.imu``), EuRoC ADIS16448 noise plus a turn-on gyro bias, one seed per sequence.
 Frames are scored against the smoothed motion's pitch and roll; every method starts from the true
 attitude at frame 0.
 

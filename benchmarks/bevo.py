@@ -3,7 +3,7 @@
 training frames per second (value and gradient of the motion loss over windows of 64 frames,
 ``jax.checkpoint`` per frame) and the compiled training step's peak memory (XLA's memory
 analysis: arguments + temporaries + outputs), for one window of 64 frames; for BEVO with the band
-geometry (``jbevo.bands``, the top-level keys) and without (``without_bands``).
+geometry (``jbevo.vision.bands``, the top-level keys) and without (``without_bands``).
 
     python benchmarks/bevo.py [--sequences 4] [--frames 64] [--repeats 3]
 

@@ -111,3 +111,11 @@ def test_evaluate_shards_over_four_cpu_devices(tmp_path):
     assert result.returncode == 0, result.stderr[-2000:]
     metrics = json.loads((out / "metrics.json").read_text())
     assert len(metrics["devices"]) == 4 and len(metrics["per_sequence"]) == 3
+
+
+def test_kitti_defaults_select_on_08_and_never_on_a_training_sequence(tmp_path, capsys):
+    args = train.build_parser().parse_args(["--dataset", "kitti"])
+    assert args.val == ["08"] and "08" not in args.train and not {"09", "10"} & set(args.train + args.val)
+    argv = ["--dataset", "kitti", "--kitti-root", str(tmp_path), "--train", "00", "08", "--val", "08"]
+    assert train.main(argv) == 1
+    assert "sequences 08 would both train and select the checkpoint" in capsys.readouterr().err

@@ -96,7 +96,13 @@ def test_matching_rejects_mixed_formats_and_unknown_frames(tmp_path):
     tum = pose_files.Trajectory(random_poses(5), None, np.arange(5.0))
     with pytest.raises(ValueError, match="cannot match"):
         pose_files.match_frames(kitti, tum)
-    with pytest.raises(ValueError, match="frame indices up to 7"):
+    with pytest.raises(ValueError, match="no frame 7 of the estimate"):
         pose_files.match_frames(kitti, pose_files.Trajectory(random_poses(2), np.array([1, 7]), None))
+    # A ground truth of frames 100-104 (13 columns) pairs with an estimate of 102-104.
+    late_gt = pose_files.Trajectory(random_poses(5), np.arange(100, 105), None)
+    est = random_poses(3, seed=2)
+    _, est_full, valid = pose_files.match_frames(late_gt, pose_files.Trajectory(est, np.arange(102, 105), None))
+    np.testing.assert_array_equal(valid, [False, False, True, True, True])
+    np.testing.assert_allclose(est_full[2:], est)
     with pytest.raises(ValueError, match="no ground truth within"):
         pose_files.match_frames(tum, pose_files.Trajectory(random_poses(1), None, np.array([2.5])))

@@ -189,7 +189,7 @@ def test_a_large_initial_pose_error_is_corrected(carla):
 
 def test_gradient_of_the_loss_matches_finite_differences(float64, world):
     """Every learnable leaf of the localizer itself (the odometry's are checked in
-    test_odometry), central differences in float64."""
+    tests/models/test_bevo.py), central differences in float64."""
     assert jnp.result_type(float) == jnp.float64
     sc = scene("carla", "town02", "day", "all", seed=2, world=world, frames=8)
     model = localization_model("carla")
@@ -220,7 +220,7 @@ def test_scene_parts_follow_the_seed_split(world):
 def test_bevo_plus_composes_an_odometry_with_bands(carla):
     """BEVO+ runs with the band geometry in its odometry (the odometry BEV is then projected once
     more, with the attitude after both the bands and the map updated it). On this 128 x 416
-    camera the far band is too blurred for the bands to help (jbevo.bands): only the mechanics
+    camera the far band is too blurred for the bands to help (jbevo.vision.bands): only the mechanics
     are checked here."""
     seq, m = carla.sequence, carla.map
     model = localization_model("carla")

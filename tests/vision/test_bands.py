@@ -1,4 +1,4 @@
-"""The BEV band geometry (jbevo.bands): on KITTI-size images of the synthetic world, a pitch error
+"""The BEV band geometry (jbevo.vision.bands): on KITTI-size images of the synthetic world, a pitch error
 is measured from the forward-shift slope and removed from the forward motion, a roll error's
 false turn is corrected, a pitch drift at standstill is read as gyro bias, and BEVO with bands
 pulls a wrong pitch back; gradients of the band parameters match finite differences."""

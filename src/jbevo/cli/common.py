@@ -20,6 +20,7 @@ from pathlib import Path
 from jbevo.data.catalog import DATASETS
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.bev_grid import BevGrid
+from jbevo.training.loop import TrainingDiverged
 
 
 class CommandError(Exception):
@@ -34,6 +35,16 @@ def reading(what: str) -> Iterator[None]:
         yield
     except (ValueError, OSError) as error:
         raise CommandError(f"{what}: {error}") from None
+
+
+@contextlib.contextmanager
+def diverged_as_command_error() -> Iterator[None]:
+    """Turn a training run whose loss stopped being finite into a :class:`CommandError` (it names
+    the epoch and the step, and what to change)."""
+    try:
+        yield
+    except TrainingDiverged as error:
+        raise CommandError(str(error)) from None
 
 
 def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace], object], argv: Sequence[str] | None) -> int:
@@ -171,6 +182,7 @@ __all__ = [
     "CommandError",
     "GridAction",
     "dataset_options",
+    "diverged_as_command_error",
     "grid_option",
     "json_args",
     "non_negative_int",

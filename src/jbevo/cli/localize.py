@@ -52,7 +52,7 @@ from jbevo.models.presets import localization_model
 from jbevo.models.runners import run_bevo_batch, run_bevo_plus_batch
 from jbevo.progress import progress
 from jbevo.training import checkpoint
-from jbevo.training.loop import TrainingDiverged, make_step, run_epoch, save_epoch, start_run
+from jbevo.training.loop import make_step, save_epoch, start_run, train_epochs
 from jbevo.training.validation import validate_localization
 
 FILE_TAGS = {"BEVO+": "bevo_plus", "BEVO odometry": "odometry", "map matching alone": "map_only"}
@@ -102,23 +102,17 @@ def train(args: argparse.Namespace) -> int:
         return jnp.mean(jax.vmap(lambda o, s: localization_loss(o, s, args.yaw_weight))(out, batch))
 
     step = make_step(static, optimizer, loss)
-    rng = np.random.default_rng(args.seed + progress_["epoch"])
-    for epoch in range(progress_["epoch"], args.epochs):
-        try:
-            params, opt_state, mean_loss, steps = run_epoch(
-                step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}"
+    epochs = train_epochs(step, params, static, opt_state, windows, args.batch, args.seed, progress_, args.epochs)
+    with common.diverged_as_command_error():
+        for model, opt_state, mean_loss in epochs:
+            val = validate_localization(model, val_scene.sequence, val_scene.map)
+            epoch = progress_["epoch"]
+            progress_["history"].append({"epoch": epoch, "loss": mean_loss, **{f"val_{k}": v for k, v in val.items()}})
+            print(
+                f"epoch {epoch}: loss {mean_loss:.5f}  val mean {val['mean_position_error_m']:.3f} m  "
+                f"max {val['max_position_error_m']:.3f} m  yaw {val['mean_yaw_error_deg']:.3f} deg"
             )
-        except TrainingDiverged as error:
-            raise common.CommandError(str(error)) from None
-        model = eqx.combine(params, static)
-        val = validate_localization(model, val_scene.sequence, val_scene.map)
-        progress_["epoch"], progress_["step"] = epoch + 1, progress_["step"] + steps
-        progress_["history"].append({"epoch": epoch + 1, "loss": mean_loss, **{f"val_{k}": v for k, v in val.items()}})
-        print(
-            f"epoch {epoch + 1}: loss {mean_loss:.5f}  val mean {val['mean_position_error_m']:.3f} m  "
-            f"max {val['max_position_error_m']:.3f} m  yaw {val['mean_yaw_error_deg']:.3f} deg"
-        )
-        save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", val["mean_position_error_m"])
+            save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", val["mean_position_error_m"])
 
     with common.reading(f"{args.out / 'best.ckpt'}"):
         best_model, _, best_progress = checkpoint.load(args.out / "best.ckpt")

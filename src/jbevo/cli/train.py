@@ -1,8 +1,7 @@
 """Train BEVO's parameters with optax through ``jax.grad`` of the whole recursion.
 
-    python -m jbevo.train                       # built-in synthetic drives, ~2 min on 2 cores
-    python -m jbevo.train --dataset kitti-synthetic --kitti-poses $JBEVO_REFERENCE_DATA/kitti_odom/gt_poses \
-        --window 96 --start warm --val-start warm
+    python -m jbevo.train                       # the built-in synthetic drives
+    python -m jbevo.train --dataset kitti-synthetic --kitti-poses poses/ --window 96 --start warm --val-start warm
     python -m jbevo.train --dataset kitti --kitti-root /data/kitti/odometry --train 00 01 --val 09 --window 96 --start warm
 
 Training runs on windows of ``--window`` frames (stride half a window; 0, the default: the whole
@@ -25,7 +24,6 @@ import argparse
 import time
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -41,7 +39,7 @@ from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.losses import motion_loss
 from jbevo.training import checkpoint
-from jbevo.training.loop import TrainingDiverged, make_step, run_epoch, save_epoch, start_run
+from jbevo.training.loop import make_step, save_epoch, start_run, train_epochs
 from jbevo.training.validation import validate
 from jbevo.training.windows import training_windows
 
@@ -56,6 +54,8 @@ def load_datasets(args: argparse.Namespace) -> tuple[list[Sequence], list[Sequen
         train_names, val_names = seeds[:-n_val], seeds[-n_val:]
     else:
         train_names, val_names = args.train, args.val
+        if shared := sorted(set(train_names) & set(val_names)):
+            raise common.CommandError(f"sequences {', '.join(shared)} would both train and select the checkpoint")
     options = dict(
         frames=args.frames, kitti_poses=args.kitti_poses, kitti_root=args.kitti_root, camera=args.camera, town=args.town
     )
@@ -77,8 +77,12 @@ def build_parser() -> argparse.ArgumentParser:
             common.seed_option(),
         ],
     )
-    p.add_argument("--train", nargs="+", default=list(splits.KITTI_TRAIN), help="training sequence names (KITTI datasets)")
-    p.add_argument("--val", nargs="+", default=list(splits.KITTI_TEST), help="validation sequence names (KITTI datasets)")
+    p.add_argument(
+        "--train", nargs="+", default=list(splits.KITTI_FIT), help="training sequence names (KITTI datasets; default 00-07)"
+    )
+    p.add_argument(
+        "--val", nargs="+", default=list(splits.KITTI_VALIDATION), help="validation sequence names (KITTI datasets; default 08)"
+    )
     p.add_argument(
         "--sequences", type=common.positive_int, default=5, help="number of built-in synthetic drives (one fifth validate)"
     )
@@ -145,22 +149,16 @@ def train(args: argparse.Namespace) -> int:
         return jnp.mean(jax.vmap(lambda o, s: motion_loss(o, s, args.yaw_weight))(out, batch))
 
     step = make_step(static, optimizer, loss)
-    rng = np.random.default_rng(args.seed + progress["epoch"])
-    for epoch in range(progress["epoch"], args.epochs):
-        try:
-            params, opt_state, mean_loss, steps = run_epoch(
-                step, params, opt_state, windows, args.batch, rng, f"epoch {epoch + 1}/{args.epochs}"
+    epochs = train_epochs(step, params, static, opt_state, windows, args.batch, args.seed, progress, args.epochs)
+    with common.diverged_as_command_error():
+        for model, opt_state, mean_loss in epochs:
+            val = validate(model, val_seqs, lengths, args.val_window, val_warm)
+            epoch = progress["epoch"]
+            progress["history"].append(
+                {"epoch": epoch, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]}
             )
-        except TrainingDiverged as error:
-            raise common.CommandError(str(error)) from None
-        model = eqx.combine(params, static)
-        val = validate(model, val_seqs, lengths, args.val_window, val_warm)
-        progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
-        progress["history"].append(
-            {"epoch": epoch + 1, "loss": mean_loss, "val_t_err_pct": val["t_err_pct"], "val_ate_m": val["ate_m"]}
-        )
-        print(f"epoch {epoch + 1}: loss {mean_loss:.5f}  validation {format_scores(val)}")
-        save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion(val))
+            print(f"epoch {epoch}: loss {mean_loss:.5f}  validation {format_scores(val)}")
+            save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion(val))
 
     with common.reading(f"{args.out / 'best.ckpt'}"):
         best, _, best_progress = checkpoint.load(args.out / "best.ckpt")

@@ -150,8 +150,9 @@ def match_frames(gt: Trajectory, est: Trajectory, tolerance_s: float = 1e-3) -> 
     """
     n = len(gt.poses)
     if gt.frame_index is not None and est.frame_index is not None:
-        if est.frame_index.max() >= n or not np.all(np.isin(est.frame_index, gt.frame_index)):
-            raise ValueError(f"the estimate has frame indices up to {est.frame_index.max()}; the ground truth has {n} frames")
+        missing = est.frame_index[~np.isin(est.frame_index, gt.frame_index)]
+        if missing.size:
+            raise ValueError(f"the ground truth has no frame {missing[0]} of the estimate ({missing.size} such frames)")
         pos = np.searchsorted(gt.frame_index, est.frame_index)
     elif gt.timestamps is not None and est.timestamps is not None:
         pos = np.clip(np.searchsorted(gt.timestamps, est.timestamps), 1, n - 1)

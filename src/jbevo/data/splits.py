@@ -1,5 +1,6 @@
 """The data splits of the experiments: KITTI odometry's train (00-08) and test (09, 10)
-sequences, and the localization scenes' quarters (the first two train, the third validates, the
+sequences, the training sequences split once more for checkpoint selection (fit on 00-07,
+validate on 08), and the localization scenes' quarters (the first two train, the third validates, the
 last tests)."""
 
 from __future__ import annotations
@@ -10,6 +11,14 @@ KITTI_TRAIN = ("00", "01", "02", "03", "04", "05", "06", "07", "08")
 
 
 KITTI_TEST = ("09", "10")
+
+
+#: The training sequences that fit the parameters when 08 selects the checkpoint.
+KITTI_FIT = KITTI_TRAIN[:-1]
+
+
+#: The training sequence that selects the checkpoint (never a test sequence).
+KITTI_VALIDATION = KITTI_TRAIN[-1:]
 
 
 def split_quarters(seq: Sequence) -> tuple[Sequence, Sequence, Sequence]:
@@ -34,4 +43,4 @@ def part_range(frames: int, part: str) -> tuple[int, int]:
     return ranges[part]
 
 
-__all__ = ["KITTI_TEST", "KITTI_TRAIN", "PARTS", "part_range", "split_quarters"]
+__all__ = ["KITTI_FIT", "KITTI_TEST", "KITTI_TRAIN", "KITTI_VALIDATION", "PARTS", "part_range", "split_quarters"]

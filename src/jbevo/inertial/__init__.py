@@ -3,11 +3,12 @@ accelerometer tilt as measurement; learnable noise) and the speed-aided filter B
 
 from jbevo.inertial.attitude_filter import AttitudeFilter
 from jbevo.inertial.kinematics import GRAVITY, accel_tilt, body_acceleration, euler_rates, gyro_yaw_increment, tilt_measurements
-from jbevo.inertial.speed_aided import SpeedAidedAttitude
+from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 
 __all__ = [
     "GRAVITY",
     "AttitudeFilter",
+    "AttitudeState",
     "SpeedAidedAttitude",
     "accel_tilt",
     "body_acceleration",

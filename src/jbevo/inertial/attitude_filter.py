@@ -17,7 +17,7 @@ bias ``(bx, by, bz)`` (rad/s, random walk). One filter step per camera frame:
   0.05 m/s^2 of false lateral force); with the bias state the measurement model predicts it, so
   the filter can tell it from tilt.
 
-Q (per frame) and R are learnable :class:`jbevo.DiagonalCovariance` s. Missing IMU samples
+Q (per frame) and R are learnable :class:`jbevo.filtering.noise.DiagonalCovariance` s. Missing IMU samples
 (NaN) are skipped: a frame's motion integrates its valid gyro samples with the mean of those
 filling the gaps, its measurement averages the valid accelerometer samples, and a frame with none
 makes no update (the UKF skips NaN measurements exactly).

@@ -3,7 +3,7 @@ by DPC against a crop of a map at that prediction, and a UKF over ``(x, y, yaw)`
 
 Per frame ``t`` (:meth:`BevoPlus.__call__`, one ``lax.scan``; ``vmap`` over sequences):
 
-1. **Odometry.** :meth:`jbevo.odometry.Bevo.step`: the attitude filter, the BEV, DPC against the
+1. **Odometry.** :meth:`jbevo.models.bevo.Bevo.step`: the attitude filter, the BEV, DPC against the
    previous BEV, the body-frame increment ``u_t = (dx, dy, dyaw)``.
 2. **Predict.** The pose filter composes ``u_t`` onto its state (:func:`planar_pose_model`) with
    the motion noise ``Q = diag(exp(2 motion_log_std))`` (per frame; learned).
@@ -12,8 +12,8 @@ Per frame ``t`` (:meth:`BevoPlus.__call__`, one ``lax.scan``; ``vmap`` over sequ
    inside the map.
 4. **Map matching.** The frame's BEV on the same grid (same pitch and roll as the odometry) and
    the crop are both limited to the pixels valid in both, feathered, and registered by DPC (their
-   own learned :class:`jbevo.registration.DPCParams`): the crop is the view from ``p``, the BEV the
-   view from the true pose, so :func:`jbevo.camera.bev_increment` of their registration is the
+   own learned :class:`jbevo.vision.dpc_params.DPCParams`): the crop is the view from ``p``, the BEV the
+   view from the true pose, so :func:`jbevo.vision.bev.bev_increment` of their registration is the
    body-frame correction and ``p (+) correction`` the map fix ``z_t``.
 5. **Update.** The fix updates the filter with the noise ``R(c)``: standard deviations
    ``exp(fix_log_std) * c ** -exp(log_confidence_power)`` along and across the body's heading and
@@ -37,7 +37,7 @@ Every learnable part (the odometry's 14, the map DPC's 6, ``motion_log_std`` 3,
 :func:`localization_loss` on the filtered positions and yaw.
 
 The map's pixel ``(row, col)`` is world ``x = x_max - row * resolution``,
-``y = y_max - col * resolution`` (:class:`jbevo.datasets.maps.Map`): its axes are those of a BEV
+``y = y_max - col * resolution`` (:class:`jbevo.data.map.Map`): its axes are those of a BEV
 at yaw 0.
 """
 

@@ -53,6 +53,20 @@ def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.
     return params, opt_state, float(np.mean(losses)), steps
 
 
+def train_epochs(step, params, static, opt_state, windows: Any, batch: int, seed: int, progress: dict, epochs: int):
+    """Run the epochs from ``progress["epoch"]`` up to ``epochs`` (:func:`run_epoch` each, the
+    shuffling seeded by ``seed`` and the epoch resumed from, so a resumed run shuffles as the
+    uninterrupted one would continue), counting them in ``progress``; after each, yield
+    ``(model, opt_state, mean loss)`` with the model rebuilt from ``static``."""
+    rng = np.random.default_rng(seed + progress["epoch"])
+    for epoch in range(progress["epoch"], epochs):
+        params, opt_state, mean_loss, steps = run_epoch(
+            step, params, opt_state, windows, batch, rng, f"epoch {epoch + 1}/{epochs}"
+        )
+        progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
+        yield eqx.combine(params, static), opt_state, mean_loss
+
+
 def start_run(model, out, lr: float, clip: float, resume: bool, best_key: str):
     """The Adam optimizer (gradient clipped at global norm ``clip``) and its state for ``model``,
     and the progress record; with ``resume``, all three from ``out/last.ckpt`` (which must hold
@@ -86,4 +100,4 @@ def save_epoch(out, model, opt_state, progress: dict, best_key: str, criterion: 
     return best
 
 
-__all__ = ["TrainingDiverged", "make_step", "run_epoch", "save_epoch", "start_run"]
+__all__ = ["TrainingDiverged", "make_step", "run_epoch", "save_epoch", "start_run", "train_epochs"]

@@ -33,9 +33,9 @@ their far and near halves (:func:`register_bands`). Then:
   carries a gain (hand-set 1.3, measured on KITTI 08; learnable).
 
 The bands need detail in the far half: on KITTI-size images (376 x 1241) with a 256 x 256 BEV at
-0.1 m/px they bring BEVO within 10 % of the true attitude's accuracy; on 128 x 416 images with a
-128 x 128 BEV the far band is too blurred and the pitch measurement biased (it lowers accuracy
-there), so :class:`jbevo.models.bevo.Bevo` leaves them off unless asked.
+0.1 m/px they bring BEVO near the true attitude's accuracy (``experiments/bands.py``); on
+128 x 416 images with a 128 x 128 BEV the far band is too blurred and the pitch measurement
+biased (it lowers accuracy there), so :class:`jbevo.models.bevo.Bevo` leaves them off unless asked.
 """
 
 from __future__ import annotations
@@ -114,8 +114,8 @@ class BandGeometry(eqx.Module):
         self, prev: Float[Array, "h w"], bev: Float[Array, "h w"], reg: Registration, grid: BevGrid, params: DPCParams
     ) -> BandShifts:
         """``prev`` turned by the full registration's rotation, then :func:`register_bands`. (Moving
-        it by the translation too measured worse on 600 frames of KITTI 09: 1.18 % t_err bilinear,
-        0.93 % by whole pixels, against 0.80 %.)"""
+        it by the translation too, bilinearly or by whole pixels, measured worse on KITTI-style
+        drives.)"""
         turned = rotate_image(prev, reg.rotation, jnp.mean(prev))
         shift, confidence = register_bands(turned, bev, params)
         shift = grid.resolution * shift

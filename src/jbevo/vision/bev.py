@@ -65,7 +65,7 @@ def bev_project(
 
 def bev_increment(grid: BevGrid, rotation: Float[ArrayLike, ""], translation: Float[Array, " 2"]) -> Float[Array, " 3"]:
     """The body-frame motion ``(dx, dy, dyaw)`` from the pose a BEV ``a`` was taken at to the pose
-    of BEV ``b``, given the :func:`jbevo.registration.register` result ``(rotation, translation)``
+    of BEV ``b``, given the :func:`jbevo.vision.registration.register` result ``(rotation, translation)``
     that carries ``a`` onto ``b`` (same ``grid``).
 
     With ``R = R(dyaw)`` (standard, counter-clockwise), BEV origin ``o`` and image centre ``c``
