@@ -10,6 +10,7 @@ from jbevo.data.sequence import Sequence
 from jbevo.data.synthetic.sequences import builtin_dataset, kitti_sequence, small_camera
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.camera import Camera
+from jbevo.progress import progress
 
 DATASETS = ("synthetic", "kitti-synthetic", "kitti")
 
@@ -29,7 +30,7 @@ def load_sequences(
     pose files are in ``kitti_poses`` (``frames`` caps the length, 0 = all; ``camera`` small or
     kitti); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is missing."""
     if dataset == "synthetic":
-        return [builtin_dataset(frames, 1, town, int(n))[0] for n in names]
+        return [builtin_dataset(frames, 1, town, int(n))[0] for n in progress(names, "rendering synthetic drives")]
     if dataset == "kitti-synthetic":
         if kitti_poses is None:
             raise ValueError("the kitti-synthetic dataset needs kitti_poses, the folder of KITTI pose files NN.txt")
@@ -38,7 +39,7 @@ def load_sequences(
         world = World.create(town)
         cam = small_camera() if camera == "small" else Camera.kitti()
         out = []
-        for i, name in enumerate(names):
+        for i, name in enumerate(progress(names, "rendering KITTI motion in the synthetic world")):
             path = Path(kitti_poses) / f"{name}.txt"
             if not path.is_file():
                 raise ValueError(f"no KITTI pose file {path}")
@@ -51,7 +52,7 @@ def load_sequences(
             raise ValueError("the kitti dataset needs kitti_root, a KITTI odometry folder")
         from jbevo.data.kitti import read_odometry
 
-        return [read_odometry(kitti_root, n) for n in names]
+        return [read_odometry(kitti_root, n) for n in progress(names, "reading KITTI sequences")]
     raise ValueError(f"unknown dataset {dataset!r}; known: {DATASETS}")
 
 

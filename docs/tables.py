@@ -1,0 +1,431 @@
+"""The generated tables and values of the README and docs/, each a function of committed JSON.
+
+:data:`TABLES` and :data:`VALUES` map a marker's name (see ``docs/build.py``) to a function that
+reads the records under ``benchmarks/results/`` and ``experiments/results/`` and returns Markdown.
+Learned figures over several training seeds are written as ``mean ± standard deviation`` over the
+seeds (the number of seeds in the table's header); figures of one deterministic run are written
+as they are.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterable, Sequence
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+
+__all__ = ["TABLES", "VALUES"]
+
+
+@cache
+def record(name: str) -> dict:
+    """The JSON record ``name`` (a path relative to the project root)."""
+    return json.loads((ROOT / name).read_text())
+
+
+def table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """A Markdown table; the first column left-aligned, the others right-aligned."""
+    lines = ["| " + " | ".join(header) + " |", "| --- |" + " ---: |" * (len(header) - 1)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def num(x: float | None, digits: int = 2) -> str:
+    """``x`` with ``digits`` decimals; ``-`` for a missing value (no segment, no run)."""
+    return "-" if x is None else f"{x:.{digits}f}"
+
+
+def spread(values: Sequence[float | None], digits: int = 2) -> str:
+    """``mean ± sd`` of the values over seeds (population standard deviation); the value alone
+    where every seed gives the same; ``-`` if any is missing."""
+    if not values or any(v is None for v in values):
+        return "-"
+    a = np.asarray(values, float)
+    if np.all(a == a[0]):  # the same run on every seed (hand-set parameters on fixed drives)
+        return f"{a[0]:.{digits}f}"
+    return f"{a.mean():.{digits}f} ± {a.std():.{digits}f}"
+
+
+def seeds_of(runs: dict) -> list[str]:
+    """The seed keys of a ``{seed: run}`` dict, in numeric order."""
+    return sorted(runs, key=int)
+
+
+# ----------------------------------------------------------------------------- filtering
+
+
+def filtering_demo() -> str:
+    d = record("experiments/results/filtering_demo.json")
+    seeds = seeds_of(d["seeds"])
+    keys = [
+        ("position_rmse_m", "position RMSE (m)"),
+        ("position_max_m", "max position error (m)"),
+        ("yaw_mean_deg", "mean yaw error (deg)"),
+    ]
+    rows = []
+    for part, label in (("before", "hand-set (wrong Q, R)"), ("after", "learned")):
+        rows.append([label, *(spread([d["seeds"][s][part][k] for s in seeds], 3) for k, _ in keys)])
+    return table([f"validation drives ({len(seeds)} seeds)", *(h for _, h in keys)], rows)
+
+
+def ukf_speed() -> str:
+    d = record("benchmarks/results/ukf.json")
+    runs = d["runs"]
+    methods = [
+        ("jbevo_single", "jbevo, one sequence"),
+        ("jbevo_single_checked", "jbevo, one sequence, input checks on"),
+        ("dynamax_single", "dynamax, one sequence"),
+        ("filterpy_single", "filterpy, one sequence"),
+        ("jbevo_vmap64", f"jbevo, vmap over {d['batch']}"),
+        ("dynamax_vmap64", f"dynamax, vmap over {d['batch']}"),
+        ("dynamax_vmap64_sincos", f"dynamax + jbevo's sincos, vmap over {d['batch']}"),
+    ]
+    rows = []
+    for key, label in methods:
+        ref = "jbevo_vmap64" if "vmap" in key else "jbevo_single"
+        if key in runs[0]:
+            values = [r[key] for r in runs]
+            speed = f"{np.median(values):,.0f} ({min(values):,.0f} - {max(values):,.0f})"
+            ratio = np.median([r[ref] / r[key] for r in runs])
+        else:  # measured once (filterpy is slow), against the median of jbevo's runs
+            speed, ratio = f"{d[key]:,.0f} (once)", d[ref] / d[key]
+        rows.append([label, speed, f"{ratio:.2f}"])
+    return table([f"method ({len(runs)} runs)", "steps/s, median (range)", "jbevo is x faster"], rows)
+
+
+def ukf_agreement() -> str:
+    d = record("benchmarks/results/ukf.json")
+    return f"{d['max_abs_diff_vs_filterpy']:.1e} and {d['max_abs_diff_vs_dynamax']:.1e}"
+
+
+def attitude_synthetic() -> str:
+    d = record("benchmarks/results/attitude.json")
+    rows = [
+        ("accelerometer tilt only", d["rmse_deg_accel_only"], None),
+        ("gyro integration only", d["rmse_deg_gyro_only"], None),
+        ("DUKF (pitch, roll)", d["rmse_deg_dukf_handset"], d["rmse_deg_dukf_learned"]),
+        ("DUKF + gyro bias", d["rmse_deg_dukf_gyro_bias_handset"], d["rmse_deg_dukf_gyro_bias_learned"]),
+        ("motion-compensated + bias", d["rmse_deg_motion_compensated_handset"], d["rmse_deg_motion_compensated"]),
+        ("speed-aided (BEVO's)", d["rmse_deg_speed_aided_handset"], d["rmse_deg_speed_aided"]),
+    ]
+    return table(
+        ["pitch and roll RMSE on 09 + 10 (deg)", "hand-set", "learned"],
+        [[name, num(hand, 3), num(learned, 3)] for name, hand, learned in rows],
+    )
+
+
+# ----------------------------------------------------------------------------- registration
+
+
+def registration_sets() -> str:
+    d = record("benchmarks/results/registration.json")
+    rows = []
+    for name, s in d["sets"].items():
+        seeds = seeds_of(s["seeds"])
+        pairs = d["config"]["pairs_per_set_and_seed"] * len(seeds)
+        cells = [name]
+        for kind, unit in (("T", "px"), ("R", "deg"), ("N", "deg")):
+            med = np.median([s["seeds"][k][f"jbevo_{kind}_median_{unit}"] for k in seeds])
+            p95 = np.median([s["seeds"][k][f"jbevo_{kind}_p95_{unit}"] for k in seeds])
+            gross = sum(s["seeds"][k][f"jbevo_{kind}_gross"] for k in seeds)
+            cells.append(f"{med:.3f} / {p95:.3f} ({gross}/{pairs})")
+        cells.append(f"{np.median([s['seeds'][k]['jbevo_N_confidence_median'] for k in seeds]):.2f}")
+        rows.append(cells)
+    return table(["set", "T: px (gross)", "R: deg (gross)", "N: deg (gross)", "N: median confidence"], rows)
+
+
+def registration_peers() -> str:
+    s = record("benchmarks/results/registration.json")["sets"]["tuning"]["seeds"]["0"]
+    rows = []
+    for method in ("jbevo", "imreg_dft", "cv2", "skimage"):
+        cells = [method]
+        for kind, unit in (("T", "px"), ("R", "deg"), ("N", "deg")):
+            key = f"{method}_{kind}"
+            if f"{key}_median_{unit}" in s:
+                cells.append(
+                    f"{s[f'{key}_median_{unit}']:.3f} / {s[f'{key}_p95_{unit}']:.3f}, {s[f'{key}_gross']} gross, {s[f'{key}_ms']:.2f} ms"
+                )
+            else:
+                cells.append("-")
+        rows.append(cells)
+    return table(["method", "T: median / p95 px", "R: median / p95 deg", "N: median / p95 deg"], rows)
+
+
+# ----------------------------------------------------------------------------- BEV, simulator, BEVO speed
+
+
+def bev_speed() -> str:
+    d = record("benchmarks/results/bev.json")
+    rows = [
+        ["jbevo (JAX, batched)", f"{d['jbevo_bev_per_s']:,.0f}", "1.00"],
+        ["OpenCV warpPerspective", f"{d['opencv_bev_per_s']:,.0f}", f"{d['jbevo_bev_per_s'] / d['opencv_bev_per_s']:.2f}"],
+        [
+            "dm-pix flat_nd_linear_interpolate",
+            f"{d['dm_pix_bev_per_s']:,.0f}",
+            f"{d['jbevo_bev_per_s'] / d['dm_pix_bev_per_s']:.2f}",
+        ],
+    ]
+    return table([f"BEV {d['config']['bev']} from {d['config']['image']}", "BEVs/s", "jbevo / this"], rows)
+
+
+def bevo_speed() -> str:
+    d = record("benchmarks/results/bevo.json")
+    nb = d["without_bands"]
+    rows = [
+        ["inference (frames/s)", num(d["inference_frames_per_s"], 0), num(nb["inference_frames_per_s"], 0)],
+        [
+            f"training, {d['window_frames']}-frame windows (frames/s)",
+            num(d["train_frames_per_s"], 0),
+            num(nb["train_frames_per_s"], 0),
+        ],
+        [
+            f"peak memory of a {d['window_frames']}-frame gradient (GB)",
+            num(d["peak_memory_gb_window64"], 3),
+            num(nb["peak_memory_gb_window64"], 3),
+        ],
+        ["learnable parameters", str(d["learnable_parameters"]), str(nb["learnable_parameters"])],
+    ]
+    return table(["BEVO, KITTI-size camera, 2-core CPU", "with bands", "without bands"], rows)
+
+
+def simulator_speed() -> str:
+    d = record("benchmarks/results/simulator.json")
+    rows = [
+        ["KITTI-size frame with exposure, sensor noise and 8-bit output (frames/s)", num(d["frames_per_s_kitti_size"], 0)],
+        ["KITTI-size frame, rendering only (frames/s)", num(d["render_only_frames_per_s_kitti_size"], 0)],
+        ["building a town (s)", num(d["world_build_s"], 2)],
+        ["a 200-frame drive with the small camera (s)", num(d["procedural_sequence_200_frames_small_camera_s"], 2)],
+    ]
+    return table(["simulator", "measured"], rows)
+
+
+# ----------------------------------------------------------------------------- BEVO accuracy
+
+SCORE_KEYS = [
+    ("t_err_pct", "t_err (%)"),
+    ("r_err_deg_per_100m", "r_err (deg/100 m)"),
+    ("ate_m", "ATE (m)"),
+    ("motion_rmse_m", "motion RMSE (m)"),
+]
+
+
+def builtin_training() -> str:
+    d = record("experiments/results/builtin_training.json")
+    seeds = seeds_of(d["seeds"])
+    rows = []
+    for part, part_label in (("validation", "validation drive"), ("test", "test drives")):
+        for name, label in (("hand_set", "hand-set"), ("learned", "learned (best.ckpt)")):
+            values = [d["seeds"][s][part][name] for s in seeds]
+            digits = {"t_err_pct": 2, "r_err_deg_per_100m": 2, "ate_m": 2, "motion_rmse_m": 3}
+            rows.append([f"{part_label}, {label}", *(spread([v[k] for v in values], digits[k]) for k, _ in SCORE_KEYS)])
+    return table([f"python -m jbevo.train ({len(seeds)} seeds)", *(h for _, h in SCORE_KEYS)], rows)
+
+
+def builtin_best_epochs() -> str:
+    d = record("experiments/results/builtin_training.json")
+    return ", ".join(str(d["seeds"][s]["best_epoch"]) for s in seeds_of(d["seeds"]))
+
+
+def builtin_wins() -> str:
+    d = record("experiments/results/builtin_training.json")
+    seeds = seeds_of(d["seeds"])
+
+    def wins(part: str) -> int:
+        runs = [d["seeds"][s][part] for s in seeds]
+        return sum(r["learned"]["t_err_pct"] < r["hand_set"]["t_err_pct"] for r in runs)
+
+    return (
+        f"{wins('validation')} of {len(seeds)} seeds on the validation drive, {wins('test')} of {len(seeds)} on the test drives"
+    )
+
+
+def bands() -> str:
+    d = record("experiments/results/bands.json")
+    rows = []
+    for name, r in d["results"].items():
+        rows.append(
+            [
+                name,
+                num(r["t_err_pct"]),
+                num(r["r_err_deg_per_100m"]),
+                num(r["ate_m"]),
+                num(r["motion_rmse_m"], 3),
+                num(r["pitch_rms_deg"], 3),
+                num(r["roll_rms_deg"], 3),
+            ]
+        )
+    return table(
+        [
+            f"KITTI {d['sequence']}, {d['frames']} frames",
+            "t_err (%)",
+            "r_err (deg/100 m)",
+            "ATE (m)",
+            "motion RMSE (m)",
+            "pitch RMS (deg)",
+            "roll RMS (deg)",
+        ],
+        rows,
+    )
+
+
+def kitti_odometry() -> str:
+    d = record("experiments/results/kitti_odometry.json")
+    tests = d["test"]
+    seeds = seeds_of(d["learned"])
+    header = ["method", *(f"{t} t_err (%)" for t in tests), "pooled t_err (%)", "pooled r_err (deg/100 m)"]
+    rows = [
+        [
+            f"BEVO learned ({len(seeds)} seeds)",
+            *(spread([d["learned"][s][t]["t_err_pct"] for s in seeds]) for t in tests),
+            spread([d["learned"][s]["pooled"]["t_err_pct"] for s in seeds]),
+            spread([d["learned"][s]["pooled"]["r_err_deg_per_100m"] for s in seeds]),
+        ]
+    ]
+    for name, r in d["hand_set"].items():
+        rows.append(
+            [
+                name,
+                *(num(r[t]["t_err_pct"]) for t in tests),
+                num(r["pooled"]["t_err_pct"]),
+                num(r["pooled"]["r_err_deg_per_100m"]),
+            ]
+        )
+    return table(header, rows)
+
+
+def kitti_validation() -> str:
+    d = record("experiments/results/kitti_odometry.json")
+    rows = []
+    for s in seeds_of(d["training"]):
+        r = d["training"][s]
+        for name, label in (("validation_hand_set", "hand-set"), ("validation_learned", "learned")):
+            v = r[name]
+            rows.append(
+                [
+                    f"seed {s}, {label}",
+                    num(v["t_err_pct"]),
+                    num(v["r_err_deg_per_100m"]),
+                    num(v["ate_m"]),
+                    num(v["motion_rmse_m"], 3),
+                ]
+            )
+        rows[-1][0] += f" (epoch {r['best_epoch']})"
+    return table(["08 (validation)", "t_err (%)", "r_err (deg/100 m)", "ATE (m)", "motion RMSE (m)"], rows)
+
+
+def kitti_wins() -> str:
+    d = record("experiments/results/kitti_odometry.json")
+    seeds = seeds_of(d["learned"])
+    hand = d["hand_set"]["BEVO hand-set"]["pooled"]["t_err_pct"]
+    test = sum(d["learned"][s]["pooled"]["t_err_pct"] < hand for s in seeds)
+    runs = [d["training"][s] for s in seeds]
+    val = sum(r["validation_learned"]["t_err_pct"] < r["validation_hand_set"]["t_err_pct"] for r in runs)
+    return f"{val} of {len(seeds)} seeds on 08 (validation), {test} of {len(seeds)} on 09 + 10 (pooled)"
+
+
+# ----------------------------------------------------------------------------- localization
+
+
+def _localization(kind: str) -> str:
+    d = record("experiments/results/localization.json")["results"][kind]
+    conditions = list(d["hand_set"])
+    seeds = seeds_of(d["learned"])
+    header = ["mean position error (m)", *conditions]
+    rows = [
+        [
+            f"BEVO+ learned ({len(seeds)} seeds)",
+            *(spread([d["learned"][s][c]["mean_position_error_m"] for s in seeds], 3) for c in conditions),
+        ],
+        ["BEVO+ hand-set", *(num(d["hand_set"][c]["mean_position_error_m"], 3) for c in conditions)],
+        ["BEVO odometry alone", *(num(d["odometry_alone"][c]["mean_position_error_m"], 3) for c in conditions)],
+        ["map matching alone", *(num(d["map_matching_alone"][c]["mean_position_error_m"], 3) for c in conditions)],
+    ]
+    return table(header, rows)
+
+
+def localization_carla() -> str:
+    return _localization("carla")
+
+
+def localization_aeroground() -> str:
+    return _localization("aeroground")
+
+
+def localization_wins() -> str:
+    results = record("experiments/results/localization.json")["results"]
+    parts = []
+    for kind, d in results.items():
+        seeds, conditions = seeds_of(d["learned"]), list(d["hand_set"])
+        key = "mean_position_error_m"
+        wins = sum(d["learned"][s][c][key] < d["hand_set"][c][key] for s in seeds for c in conditions)
+        parts.append(f"{kind} {wins} of {len(seeds) * len(conditions)}")
+    return ", ".join(parts)
+
+
+def localization_validation() -> str:
+    results = record("experiments/results/localization.json")["results"]
+    rows = []
+    for kind, d in results.items():
+        seeds = seeds_of(d["training"])
+        runs = [d["training"][s] for s in seeds]
+        rows.append(
+            [
+                kind,
+                spread([r["validation_hand_set"]["mean_position_error_m"] for r in runs], 3),
+                spread([r["validation_learned"]["mean_position_error_m"] for r in runs], 3),
+                ", ".join(str(r["best_epoch"]) for r in runs),
+            ]
+        )
+    return table(["validation quarter (mean position error, m)", "hand-set", "learned", "best epoch per seed"], rows)
+
+
+# ----------------------------------------------------------------------------- evaluation
+
+
+def reference_metrics() -> str:
+    d = record("experiments/results/reference_metrics.json")
+    rows = []
+    for name, r in d.items():
+        pub, got = r["published"], r["measured"]
+        rows.append(
+            [
+                name,
+                r["alignment"],
+                f"{got['t_err_pct']:.4f} ({pub['t_err_pct']})",
+                f"{got['r_err_deg_per_100m']:.4f} ({pub['r_err_deg_per_100m']})",
+                f"{got['ate_m']:.4f}" + (f" ({pub['ate_m']})" if "ate_m" in pub else ""),
+            ]
+        )
+    return table(["trajectory", "alignment", "t_err % (published)", "r_err deg/100 m (published)", "ATE m (published)"], rows)
+
+
+TABLES: dict[str, Callable[[], str]] = {
+    "filtering_demo": filtering_demo,
+    "ukf_speed": ukf_speed,
+    "attitude_synthetic": attitude_synthetic,
+    "registration_sets": registration_sets,
+    "registration_peers": registration_peers,
+    "bev_speed": bev_speed,
+    "bevo_speed": bevo_speed,
+    "simulator_speed": simulator_speed,
+    "builtin_training": builtin_training,
+    "bands": bands,
+    "kitti_odometry": kitti_odometry,
+    "kitti_validation": kitti_validation,
+    "localization_carla": localization_carla,
+    "localization_aeroground": localization_aeroground,
+    "localization_validation": localization_validation,
+    "reference_metrics": reference_metrics,
+}
+
+VALUES: dict[str, Callable[[], str]] = {
+    "ukf_agreement": ukf_agreement,
+    "builtin_best_epochs": builtin_best_epochs,
+    "builtin_wins": builtin_wins,
+    "kitti_wins": kitti_wins,
+    "localization_wins": localization_wins,
+}
