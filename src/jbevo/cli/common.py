@@ -20,7 +20,7 @@ from pathlib import Path
 from jbevo.data.catalog import DATASETS
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.bev_grid import BevGrid
-from jbevo.training.loop import TrainingDiverged
+from jbevo.training.loop import TrainingDiverged, load_best
 
 
 class CommandError(Exception):
@@ -45,6 +45,16 @@ def diverged_as_command_error() -> Iterator[None]:
         yield
     except TrainingDiverged as error:
         raise CommandError(str(error)) from None
+
+
+def best_checkpoint(out: Path):
+    """The model of ``out/best.ckpt`` and its epoch (:func:`jbevo.training.loop.load_best`); says
+    so when it holds the hand-set parameters."""
+    with reading(f"{out / 'best.ckpt'}"):
+        model, epoch = load_best(out)
+    if epoch == 0:
+        print("no epoch validated better than the hand-set parameters: best.ckpt holds them")
+    return model, epoch
 
 
 def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace], object], argv: Sequence[str] | None) -> int:
@@ -181,6 +191,7 @@ def json_args(args: argparse.Namespace) -> dict:
 __all__ = [
     "CommandError",
     "GridAction",
+    "best_checkpoint",
     "dataset_options",
     "diverged_as_command_error",
     "grid_option",

@@ -114,13 +114,9 @@ def train(args: argparse.Namespace) -> int:
             )
             save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", val["mean_position_error_m"])
 
-    with common.reading(f"{args.out / 'best.ckpt'}"):
-        best_model, _, best_progress = checkpoint.load(args.out / "best.ckpt")
-    best_epoch = best_progress.get("best_epoch", 0)
+    best_model, best_epoch = common.best_checkpoint(args.out)
     after = validate_localization(best_model, val_scene.sequence, val_scene.map)
     _print(f"validation after training (best checkpoint, epoch {best_epoch})", after)
-    if best_epoch == 0:
-        print("no epoch validated better than the hand-set parameters: best.ckpt holds them")
     write_json_atomic(
         args.out / "metrics.json",
         {

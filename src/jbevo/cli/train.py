@@ -29,7 +29,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo.cli import common
-from jbevo.data import sequence as sq
 from jbevo.data import splits
 from jbevo.data.catalog import load_sequences
 from jbevo.data.sequence import Sequence
@@ -38,7 +37,6 @@ from jbevo.files import write_json_atomic
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.losses import motion_loss
-from jbevo.training import checkpoint
 from jbevo.training.loop import make_step, save_epoch, start_run, train_epochs
 from jbevo.training.validation import validate
 from jbevo.training.windows import training_windows
@@ -126,7 +124,7 @@ def train(args: argparse.Namespace) -> int:
         model, params, static, optimizer, opt_state, progress = start_run(
             Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
         )
-        windows = sq.stack(train_seqs) if args.window == 0 else training_windows(train_seqs, args.window)
+        windows = training_windows(train_seqs, args.window)
     print(
         f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
         f"({args.dataset}); segment lengths {list(lengths)} m"
@@ -160,13 +158,9 @@ def train(args: argparse.Namespace) -> int:
             print(f"epoch {epoch}: loss {mean_loss:.5f}  validation {format_scores(val)}")
             save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion(val))
 
-    with common.reading(f"{args.out / 'best.ckpt'}"):
-        best, _, best_progress = checkpoint.load(args.out / "best.ckpt")
-    best_epoch = best_progress.get("best_epoch", 0)
+    best, best_epoch = common.best_checkpoint(args.out)
     after = validate(best, val_seqs, lengths, args.val_window, val_warm)
     print(f"validation after training (best checkpoint, epoch {best_epoch}): {format_scores(after)}")
-    if best_epoch == 0:
-        print("no epoch validated better than the hand-set parameters: best.ckpt holds them")
     whole = {}
     if args.val_window:
         whole = {

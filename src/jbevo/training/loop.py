@@ -87,17 +87,22 @@ def start_run(model, out, lr: float, clip: float, resume: bool, best_key: str):
     return model, params, static, optimizer, opt_state, progress
 
 
-def save_epoch(out, model, opt_state, progress: dict, best_key: str, criterion: float) -> bool:
+def save_epoch(out, model, opt_state, progress: dict, best_key: str, criterion: float) -> None:
     """``out/last.ckpt`` always, ``out/best.ckpt`` when ``criterion`` beats ``progress[best_key]``
     (lower is better; both atomic; ``progress["best_epoch"]`` records ``progress["epoch"]``, 0 for
-    the starting parameters). Returns whether it was the best so far."""
-    best = progress[best_key] is None or criterion < progress[best_key]
-    if best:
+    the starting parameters)."""
+    if progress[best_key] is None or criterion < progress[best_key]:
         progress[best_key] = criterion
         progress["best_epoch"] = progress["epoch"]
         checkpoint.save(out / "best.ckpt", model, opt_state, progress)
     checkpoint.save(out / "last.ckpt", model, opt_state, progress)
-    return best
 
 
-__all__ = ["TrainingDiverged", "make_step", "run_epoch", "save_epoch", "start_run", "train_epochs"]
+def load_best(out):
+    """The model of ``out/best.ckpt`` and the epoch it was saved at (0: the starting, hand-set
+    parameters, which no epoch validated better than)."""
+    model, _, progress = checkpoint.load(out / "best.ckpt")
+    return model, progress.get("best_epoch", 0)
+
+
+__all__ = ["TrainingDiverged", "load_best", "make_step", "run_epoch", "save_epoch", "start_run", "train_epochs"]

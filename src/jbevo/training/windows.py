@@ -10,7 +10,10 @@ from jbevo.data import sequence as sq
 
 def training_windows(seqs: list[sq.Sequence], window: int, stride: int | None = None) -> sq.Sequence:
     """Every window of ``window`` frames every ``stride`` frames (default: half a window) of the
-    sequences long enough for one, batched along a leading axis. ``ValueError`` if none is."""
+    sequences long enough for one, batched along a leading axis. ``ValueError`` if none is.
+    ``window`` 0 batches the whole sequences (which must then share one length)."""
+    if window == 0:
+        return sq.stack(seqs)
     stride = max(1, window // 2) if stride is None else stride
     parts = [sq.windows(s, window, stride) for s in seqs if s.num_frames >= window]
     if not parts:
