@@ -48,14 +48,13 @@ def test_raw_reader_groups_100_hz_oxts_into_frame_blocks(seq, tmp_path):
     drive = tmp_path / "d" / "drive_sync"
     kitti.write_raw(seq, drive)
     # Re-time the OXTS records as three samples per frame interval by duplicating them.
-    lines = (drive / "oxts" / "timestamps.txt").read_text().splitlines()
     data = sorted((drive / "oxts" / "data").glob("*.txt"))
-    times = [kitti._timestamps(drive / "oxts" / "timestamps.txt")[i] for i in range(len(lines))]
+    times = kitti._timestamps(drive / "image_00" / "timestamps.txt")
     for f in data:
         f.unlink()
     stamps = []
     for i, t in enumerate(times):
-        for j, dt in enumerate((-0.066, -0.033, 0.0)):
+        for j, dt in enumerate((-0.09, -0.06, -0.03)):
             n = 3 * i + j
             (drive / "oxts" / "data" / f"{n:010d}.txt").write_text(" ".join(["49.0", "8.4"] + ["0"] * 28))
             stamps.append(kitti._format_time(t + dt))

@@ -3,19 +3,27 @@ and writers for the same layouts (a synthetic sequence exported and read back is
 
 Odometry layout (``root/sequences/NN/{image_0/*.png, times.txt, calib.txt}``,
 ``root/poses/NN.txt``): images, times, ``P0`` intrinsics and, where the pose file exists, the
-ground truth (camera 0 poses, turned into body poses in a z-up world). It carries no IMU: the
-Sequence's IMU arrays are NaN (one sample per frame), which the attitude filter skips.
+ground truth (camera 0 poses, turned into body poses in a z-up world). The layout carries no IMU:
+without ``imu`` the Sequence's IMU arrays are NaN (one sample per frame) and a model that needs
+the IMU refuses it (:func:`has_imu`). With ``imu`` (a KITTI odometry IMU file ``NN.mat`` or the
+folder holding it, as published with the KITTI odometry IMU: the car's OXTS RT3003,
+``imu_data_interp`` of shape ``(10 (N - 1) + 1, 6)``, rows ``ax ay az wx wy wz`` in the IMU frame
+x forward, y left, z up, row ``10 k + j`` at ``j / 10`` of the way from frame ``k`` to ``k + 1``:
+:func:`read_kitti_imu`) block ``t`` holds rows ``10 (t - 1) .. 10 t - 1`` and block 0 is NaN.
 
 Raw layout (``root/DATE/DATE_drive_NNNN_sync/{image_00/data/*.png, image_00/timestamps.txt,
-oxts/data/*.txt, oxts/timestamps.txt}``, ``root/DATE/calib_cam_to_cam.txt``): the IMU is OXTS's
-``wx, wy, wz`` and ``ax, ay, az`` (body x forward, y left, z up, as jbevo's), grouped into the
-frames' blocks by timestamp (a sample at time tau belongs to frame k if
-``t_k-1 < tau <= t_k``, padded with NaN rows to a common length: the synced 10 Hz data gives one
-sample per frame, the 100 Hz extract about ten). Ground truth is the OXTS GPS/INS pose at the
-sample nearest each frame, projected with the Mercator scale of the first fix
-(``scale = cos(lat0)``, ``x = scale R lon``, ``y = scale R log tan((90 + lat) / 2)``, ``R`` the
-WGS84 equatorial radius) and ``R = Rz(yaw) Ry(pitch) Rx(roll)``, relative to the first pose, as
-KITTI's devkit does.
+oxts/data/*.txt, oxts/timestamps.txt}``, ``root/DATE/calib_cam_to_cam.txt``, or the calibration
+files in the drive's own ``calib/`` folder): the IMU is OXTS's ``wx, wy, wz`` and ``ax, ay, az``
+(body x forward, y left, z up, as jbevo's), grouped into the frames' blocks by timestamp
+(:func:`jbevo.data.imu_stream.group_blocks`: a sample at time tau belongs to frame ``t`` if
+``t_t-1 <= tau < t_t``, NaN rows padded after the real ones: the synced 10 Hz data gives 0-2
+samples per frame, the 100 Hz extract about ten), or resampled at ``samples_per_frame`` instants
+per frame (:func:`jbevo.data.imu_stream.resample_blocks`). Times are float64 seconds relative to
+the first camera frame. Ground truth is the OXTS GPS/INS pose at the sample nearest each frame,
+projected with the Mercator scale of the first fix (``scale = cos(lat0)``,
+``x = scale R lon``, ``y = scale R log tan((90 + lat) / 2)``, ``R`` the WGS84 equatorial radius)
+and ``R = Rz(yaw) Ry(pitch) Rx(roll)``; positions and heading relative to the first pose, pitch
+and roll as the INS gives them (against gravity).
 
 Errors name the file: missing folders and files, truncated or malformed lines, frame counts that
 disagree, timestamps that do not increase. Writers write every file atomically.
@@ -30,6 +38,7 @@ import cv2
 import jax.numpy as jnp
 import numpy as np
 
+from jbevo.data.imu_stream import ImuStream, group_blocks, resample_blocks
 from jbevo.data.kitti_frames import CAMERA_HEIGHT, body_poses_from_kitti, camera_poses_from_body
 from jbevo.data.sequence import Sequence, check
 from jbevo.files import write_atomic, write_text_atomic
@@ -94,8 +103,44 @@ def _sequence(images, frame_times, imu_times, gyro, accel, camera, poses) -> Seq
     )
 
 
-def read_odometry(root: str | Path, sequence: str, camera_height: float = CAMERA_HEIGHT) -> Sequence:
-    """Sequence ``sequence`` (e.g. ``"09"``) of a KITTI odometry folder; IMU arrays are NaN."""
+def read_kitti_imu(path: str | Path, frame_times: np.ndarray, rows_per_frame: int = 10) -> ImuStream:
+    """The KITTI odometry IMU file ``path`` (``NN.mat``, variable ``imu_data_interp``) as a stream
+    timed by the sequence's ``frame_times``: ``rows_per_frame`` rows per frame interval (10 as
+    published), row ``R k + j`` at ``t_k + j (t_k+1 - t_k) / R``, row ``R (N - 1)`` at the last
+    frame. A file longer than the ``N`` frames (a folder holding a drive's first frames) is cut to
+    them; a shorter one is an error."""
+    from scipy.io import loadmat
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"missing IMU file {path}")
+    try:
+        rows = np.asarray(loadmat(str(path))["imu_data_interp"], float)
+    except (KeyError, ValueError, TypeError, OSError) as error:
+        raise ValueError(f"{path} is not a KITTI odometry IMU file with imu_data_interp ({error})") from None
+    frame_times = np.asarray(frame_times, float)
+    n = len(frame_times)
+    needed = rows_per_frame * (n - 1) + 1
+    if rows.ndim != 2 or rows.shape[1] != 6 or n < 2 or len(rows) < needed:
+        raise ValueError(f"{path}: imu_data_interp has shape {rows.shape}; {n} frames need at least ({needed}, 6)")
+    rows = rows[:needed]
+    fraction = np.arange(rows_per_frame) / rows_per_frame
+    times = (frame_times[:-1, None] + np.diff(frame_times)[:, None] * fraction[None, :]).reshape(-1)
+    stream = ImuStream(np.append(times, frame_times[-1]), rows[:, 3:6], rows[:, 0:3])
+    return stream.check(str(path))
+
+
+def _imu_file(imu: str | Path, sequence: str) -> Path:
+    imu = Path(imu)
+    return imu / f"{sequence}.mat" if imu.is_dir() else imu
+
+
+def read_odometry(
+    root: str | Path, sequence: str, camera_height: float = CAMERA_HEIGHT, imu: str | Path | None = None
+) -> Sequence:
+    """Sequence ``sequence`` (e.g. ``"09"``) of a KITTI odometry folder. ``imu``: the sequence's
+    KITTI odometry IMU file, or the folder holding ``NN.mat`` (:func:`read_kitti_imu`); without it
+    the IMU arrays are NaN."""
     root = Path(root)
     folder = root / "sequences" / sequence
     if not folder.is_dir():
@@ -122,16 +167,18 @@ def read_odometry(root: str | Path, sequence: str, camera_height: float = CAMERA
         poses = body_poses_from_kitti(cam)
     else:
         poses = np.full((n, 4, 4), np.nan)
-    nan = np.full((n, 1, 3), np.nan, np.float32)
-    return _sequence(
-        images,
-        times.astype(np.float32),
-        times[:, None].astype(np.float32),
-        nan,
-        nan,
-        _camera(p0, images.shape[1:], camera_height),
-        poses,
-    )
+    if imu is None:
+        nan = np.full((n, 1, 3), np.nan)
+        imu_times, gyro, accel = times[:, None], nan, nan
+    else:
+        imu_times, gyro, accel = group_blocks(read_kitti_imu(_imu_file(imu, sequence), times), times)
+    return _sequence(images, times, imu_times, gyro, accel, _camera(p0, images.shape[1:], camera_height), poses)
+
+
+def has_imu(seq: Sequence) -> bool:
+    """Whether ``seq`` holds any IMU sample (a KITTI odometry folder read without its IMU file
+    holds none)."""
+    return bool(np.any(np.isfinite(np.asarray(seq.gyro))) and np.any(np.isfinite(np.asarray(seq.accel))))
 
 
 def write_odometry(seq: Sequence, root: str | Path, sequence: str) -> None:
@@ -163,6 +210,7 @@ def _write_png(path: Path, image: np.ndarray) -> None:
 
 
 def _timestamps(path: Path) -> np.ndarray:
+    """float64 seconds since a fixed origin (to be taken relative to the first frame)."""
     if not path.is_file():
         raise FileNotFoundError(f"missing file {path}")
     out = []
@@ -193,17 +241,76 @@ def _mercator(lat, lon, scale):
 
 
 def oxts_poses(oxts: np.ndarray) -> np.ndarray:
-    """Body poses (z-up world, relative to the first) from OXTS records ``(N, >= 6)``."""
+    """Body poses (z-up world: Mercator east, north, altitude; attitude as the INS gives it)
+    from OXTS records ``(N, >= 6)``."""
     scale = np.cos(np.radians(oxts[0, 0]))
     x, y = _mercator(oxts[:, 0], oxts[:, 1], scale)
     poses = np.tile(np.eye(4), (len(oxts), 1, 1))
     poses[:, :3, :3] = rotation_zyx(oxts[:, [5, 4, 3]])
     poses[:, :3, 3] = np.stack([x, y, oxts[:, 2]], -1)
-    return np.linalg.inv(poses[0]) @ poses
+    return poses
 
 
-def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT) -> Sequence:
-    """A KITTI raw drive folder (``.../DATE_drive_NNNN_sync``; calibration in its parent)."""
+def _calibration_file(drive: Path) -> Path:
+    for candidate in (drive.parent / "calib_cam_to_cam.txt", drive / "calib" / "calib_cam_to_cam.txt"):
+        if candidate.is_file():
+            return candidate
+    raise FileNotFoundError(f"missing calib_cam_to_cam.txt beside {drive} or in {drive / 'calib'}")
+
+
+def _calibration_rows(path: Path) -> dict[str, np.ndarray]:
+    if not path.is_file():
+        raise FileNotFoundError(f"missing calibration file {path}")
+    rows = {}
+    for line in path.read_text().splitlines():
+        key, sep, rest = line.partition(":")
+        if not sep:
+            continue
+        try:
+            rows[key.strip()] = np.array([float(v) for v in rest.split()])
+        except ValueError:
+            rows[key.strip()] = np.array([])  # text fields (calib_time)
+    return rows
+
+
+def imu_to_rectified_camera(calib_folder: str | Path) -> np.ndarray:
+    """KITTI's published IMU -> rectified camera 0 transform ``(4, 4)`` from a day's calibration
+    files: ``R_rect_00 T_cam_velo T_velo_imu`` (``calib_imu_to_velo.txt``,
+    ``calib_velo_to_cam.txt``, ``calib_cam_to_cam.txt``)."""
+    folder = Path(calib_folder)
+
+    def transform(name: str) -> np.ndarray:
+        rows = _calibration_rows(folder / name)
+        if rows.get("R", np.array([])).size != 9 or rows.get("T", np.array([])).size != 3:
+            raise ValueError(f"{folder / name} needs R (9 numbers) and T (3 numbers)")
+        out = np.eye(4)
+        out[:3, :3], out[:3, 3] = rows["R"].reshape(3, 3), rows["T"]
+        return out
+
+    cam = _calibration_rows(folder / "calib_cam_to_cam.txt")
+    if cam.get("R_rect_00", np.array([])).size != 9:
+        raise ValueError(f"{folder / 'calib_cam_to_cam.txt'} has no R_rect_00 (9 numbers)")
+    rect = np.eye(4)
+    rect[:3, :3] = cam["R_rect_00"].reshape(3, 3)
+    return rect @ transform("calib_velo_to_cam.txt") @ transform("calib_imu_to_velo.txt")
+
+
+def read_oxts(drive_folder: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """The OXTS records of a raw drive: ``(times (M,) float64 seconds, records (M, 30))`` (fields
+    as KITTI's ``oxts/dataformat.txt``: lat, lon, alt, roll, pitch, yaw, ..., ax, ay, az at 11-13,
+    wx, wy, wz at 17-19)."""
+    drive = Path(drive_folder)
+    times = _timestamps(drive / "oxts" / "timestamps.txt")
+    files = sorted((drive / "oxts" / "data").glob("*.txt"))
+    if len(files) != len(times):
+        raise ValueError(f"{drive / 'oxts'}: {len(files)} records but {len(times)} timestamps")
+    return times, np.stack([_numbers(f, 30)[0] for f in files])
+
+
+def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT, samples_per_frame: int | None = None) -> Sequence:
+    """A KITTI raw drive folder (``.../DATE_drive_NNNN_sync``; calibration in its parent or its
+    ``calib/``). ``samples_per_frame``: None keeps the OXTS samples as recorded (padded blocks),
+    an integer resamples the stream at that many instants per frame interval."""
     drive = Path(drive_folder)
     if not drive.is_dir():
         raise FileNotFoundError(f"missing drive folder {drive}")
@@ -211,51 +318,38 @@ def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT) -> 
     frame_times = _timestamps(drive / "image_00" / "timestamps.txt")
     if len(frame_times) != len(images):
         raise ValueError(f"{drive / 'image_00'}: {len(images)} images but {len(frame_times)} timestamps")
-    oxts_times = _timestamps(drive / "oxts" / "timestamps.txt")
-    files = sorted((drive / "oxts" / "data").glob("*.txt"))
-    if len(files) != len(oxts_times):
-        raise ValueError(f"{drive / 'oxts'}: {len(files)} records but {len(oxts_times)} timestamps")
-    oxts = np.stack([_numbers(f, 30)[0] for f in files])
-    calib_file = drive.parent / "calib_cam_to_cam.txt"
-    rows = (
-        {k.strip(): v for k, _, v in (line.partition(":") for line in calib_file.read_text().splitlines())}
-        if calib_file.is_file()
-        else {}
-    )
+    oxts_times, oxts = read_oxts(drive)
+    calib_file = _calibration_file(drive)
+    rows = {k.strip(): v for k, _, v in (line.partition(":") for line in calib_file.read_text().splitlines())}
     if "P_rect_00" not in rows:
-        raise ValueError(f"{calib_file} is missing or has no P_rect_00 line")
+        raise ValueError(f"{calib_file} has no P_rect_00 line")
     p = np.array([float(v) for v in rows["P_rect_00"].split()]).reshape(3, 4)
-    # Samples per frame: t_k-1 < tau <= t_k (2 ms tolerance for the synced data's jitter).
-    block = np.searchsorted(frame_times + 2e-3, oxts_times, side="left")
-    keep = block < len(frame_times)
-    counts = np.bincount(block[keep], minlength=len(frame_times))
-    s = max(1, int(counts.max()))
-    gyro = np.full((len(frame_times), s, 3), np.nan)
-    accel = np.full_like(gyro, np.nan)
-    imu_times = frame_times[:, None] - (s - 1 - np.arange(s))[None, :] * 1e-6
-    slot = np.zeros(len(frame_times), int)
-    for i in np.flatnonzero(keep):
-        k = block[i]
-        j = s - counts[k] + slot[k]
-        gyro[k, j], accel[k, j], imu_times[k, j] = oxts[i, 17:20], oxts[i, 11:14], oxts_times[i]
-        slot[k] += 1
+    origin = frame_times[0]
+    frame_times, oxts_times = frame_times - origin, oxts_times - origin
+    stream = ImuStream(oxts_times, oxts[:, 17:20], oxts[:, 11:14]).check(str(drive / "oxts"))
+    if samples_per_frame is None:
+        imu_times, gyro, accel = group_blocks(stream, frame_times)
+    else:
+        imu_times, gyro, accel = resample_blocks(stream, frame_times, samples_per_frame)
     nearest = np.abs(oxts_times[None, :] - frame_times[:, None]).argmin(1)
     poses = oxts_poses(oxts)[nearest]
-    poses = np.linalg.inv(poses[0]) @ poses
-    return _sequence(
-        images,
-        frame_times.astype(np.float32),
-        imu_times.astype(np.float32),
-        gyro.astype(np.float32),
-        accel.astype(np.float32),
-        _camera(p, images.shape[1:], camera_height),
-        poses,
-    )
+    # Position and heading relative to the first frame; pitch and roll stay the INS's own.
+    first = np.eye(4)
+    first[:3, :3] = rotation_zyx(np.array([[euler_yaw(poses[0]), 0.0, 0.0]]))[0]
+    first[:3, 3] = poses[0, :3, 3]
+    poses = np.linalg.inv(first) @ poses
+    return _sequence(images, frame_times, imu_times, gyro, accel, _camera(p, images.shape[1:], camera_height), poses)
+
+
+def euler_yaw(pose: np.ndarray) -> float:
+    """The ZYX yaw of a pose's rotation."""
+    return float(np.arctan2(pose[1, 0], pose[0, 0]))
 
 
 def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0: float = 8.4) -> None:
     """Write ``seq`` as a synced raw drive: one OXTS record per frame (the block's last IMU
-    sample, as the synced data holds the sample nearest the frame), the pose placed at
+    sample at its time, as the synced data holds the sample nearest the frame; the frame's pose),
+    the pose placed at
     ``lat0, lon0`` and projected back with the Mercator scale of ``lat0``."""
     drive = Path(drive_folder)
     (drive / "image_00" / "data").mkdir(parents=True, exist_ok=True)
@@ -263,9 +357,10 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
     times = np.asarray(seq.frame_times, float)
     for i, image in enumerate(np.asarray(seq.images)):
         _write_png(drive / "image_00" / "data" / f"{i:010d}.png", image)
-    stamps = "".join(_format_time(t) + "\n" for t in times)
-    write_text_atomic(drive / "image_00" / "timestamps.txt", stamps)
-    write_text_atomic(drive / "oxts" / "timestamps.txt", stamps)
+    write_text_atomic(drive / "image_00" / "timestamps.txt", "".join(_format_time(t) + "\n" for t in times))
+    # Each record at its own sample's time, inside its frame's interval.
+    sample_times = np.asarray(seq.imu_times, float)[:, -1]
+    write_text_atomic(drive / "oxts" / "timestamps.txt", "".join(_format_time(t) + "\n" for t in sample_times))
     poses = np.asarray(seq.poses, float)
     scale = np.cos(np.radians(lat0))
     x0, y0 = _mercator(lat0, lon0, scale)
@@ -287,4 +382,15 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
     write_text_atomic(drive.parent / "calib_cam_to_cam.txt", "P_rect_00: " + " ".join(f"{v:.12e}" for v in p.ravel()) + "\n")
 
 
-__all__ = ["EARTH_RADIUS", "oxts_poses", "read_odometry", "read_raw", "write_odometry", "write_raw"]
+__all__ = [
+    "EARTH_RADIUS",
+    "has_imu",
+    "imu_to_rectified_camera",
+    "oxts_poses",
+    "read_kitti_imu",
+    "read_odometry",
+    "read_oxts",
+    "read_raw",
+    "write_odometry",
+    "write_raw",
+]

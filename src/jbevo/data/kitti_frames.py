@@ -26,6 +26,11 @@ def body_poses_from_kitti(poses: np.ndarray) -> np.ndarray:
     return out
 
 
+def body_from_camera_rotation(r_cam_x: np.ndarray) -> np.ndarray:
+    """A rotation into camera 0's axes (``R_cam_x``) re-expressed into the body's: ``R_body_x``."""
+    return _R_CAM_BODY.T @ np.asarray(r_cam_x, float)
+
+
 def camera_poses_from_body(poses: np.ndarray) -> np.ndarray:
     """Inverse of :func:`body_poses_from_kitti`, relative to the first pose (KITTI's world is
     camera 0 at frame 0)."""
@@ -37,4 +42,4 @@ def camera_poses_from_body(poses: np.ndarray) -> np.ndarray:
     return out
 
 
-__all__ = ["CAMERA_HEIGHT", "body_poses_from_kitti", "camera_poses_from_body"]
+__all__ = ["CAMERA_HEIGHT", "body_from_camera_rotation", "body_poses_from_kitti", "camera_poses_from_body"]

@@ -38,9 +38,13 @@ class Sequence(eqx.Module):
 
     @property
     def imu_dt(self) -> float:
-        """Nominal IMU sample interval (seconds), from the first batch element."""
-        t = np.asarray(self.imu_times).reshape(-1, *self.imu_times.shape[-2:])[0]
-        return float(np.median(np.diff(t.reshape(-1))))
+        """Nominal IMU sample interval (seconds): the median frame step over ``S``, from the first
+        batch element (the filters integrate ``S`` samples of ``imu_dt`` per frame, a block's
+        missing rows filled with its mean; NaN for a single frame)."""
+        t = np.asarray(self.frame_times, float).reshape(-1, self.frame_times.shape[-1])[0]
+        if len(t) < 2:
+            return float("nan")
+        return float(np.median(np.diff(t))) / self.imu_times.shape[-1]
 
     @property
     def planar(self) -> Float[Array, "T 3"]:

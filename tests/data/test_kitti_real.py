@@ -1,0 +1,89 @@
+"""The KITTI readers on the real data (skipped without JBEVO_REFERENCE_DATA): the odometry IMU
+files, a real camera run read with its IMU, and the real raw OXTS drive (its timestamps,
+0-2 samples per frame, padding after the real samples)."""
+
+import cv2
+import numpy as np
+import pytest
+import scipy.io
+
+from jbevo.data import kitti
+from jbevo.data.imu_stream import group_blocks
+
+RAW = "realdata/kitti_raw_2011_09_26_drive_0001_oxts"
+
+
+def test_odometry_imu_file_gives_ten_rows_per_frame_block(reference_data):
+    path = reference_data / "kitti_odom" / "imu" / "10.mat"
+    rows = scipy.io.loadmat(path)["imu_data_interp"]
+    t = 0.1 * np.arange(1201)
+    stream = kitti.read_kitti_imu(path, t)
+    assert stream.times.shape == (12001,) and stream.times[10] == pytest.approx(0.1)
+    times, gyro, accel = group_blocks(stream, t)
+    assert gyro.shape == (1201, 10, 3)
+    assert np.all(np.isnan(gyro[0])) and np.all(np.isfinite(gyro[1:]))
+    np.testing.assert_array_equal(gyro[5], rows[40:50, 3:6])  # block t: rows 10 (t - 1) .. 10 t - 1
+    np.testing.assert_array_equal(accel[5], rows[40:50, 0:3])
+    with pytest.raises(ValueError, match="need at least"):
+        kitti.read_kitti_imu(path, 0.1 * np.arange(1300))
+
+
+def test_real_camera_run_reads_with_its_imu(reference_data, tmp_path):
+    run = reference_data / "realdata" / "kitti_odometry_06_first51"
+    folder = tmp_path / "sequences" / "06"
+    folder.mkdir(parents=True)
+    (folder / "image_0").symlink_to(run / "image_0")
+    (folder / "times.txt").symlink_to(run / "times.txt")
+    (folder / "calib.txt").symlink_to(run / "calib.txt")
+    (tmp_path / "poses").mkdir()
+    (tmp_path / "poses" / "06.txt").symlink_to(run / "poses.txt")
+    seq = kitti.read_odometry(tmp_path, "06", imu=reference_data / "kitti_odom" / "imu")
+    assert kitti.has_imu(seq)
+    assert seq.gyro.shape == (51, 10, 3) and seq.images.shape[0] == 51
+    rows = scipy.io.loadmat(reference_data / "kitti_odom" / "imu" / "06.mat")["imu_data_interp"]
+    np.testing.assert_allclose(seq.gyro[50], rows[490:500, 3:6], rtol=1e-6)
+    assert seq.imu_dt == pytest.approx(0.01039, abs=1e-4)
+    assert not kitti.has_imu(kitti.read_odometry(tmp_path, "06"))
+
+
+def _raw_drive(reference_data, tmp_path):
+    real = reference_data / RAW
+    drive = tmp_path / "2011_09_26_drive_0001_sync"
+    (drive / "image_00" / "data").mkdir(parents=True)
+    (drive / "oxts").symlink_to(real / "oxts")
+    (drive / "calib").symlink_to(real / "calib")
+    (drive / "image_00" / "timestamps.txt").symlink_to(real / "image_00" / "timestamps.txt")
+    for i in range(108):  # the drive's images are not public here: blank frames stand in
+        cv2.imwrite(str(drive / "image_00" / "data" / f"{i:010d}.png"), np.zeros((8, 16), np.uint8))
+    return drive
+
+
+def test_real_raw_drive_keeps_its_samples_and_times(reference_data, tmp_path):
+    drive = _raw_drive(reference_data, tmp_path)
+    seq = kitti.read_raw(drive)
+    t = np.asarray(seq.frame_times, float)
+    assert t[0] == 0.0 and t[-1] == pytest.approx(11.04, abs=0.01)  # 108 frames, ~9.7 Hz
+    oxts_times, oxts = kitti.read_oxts(drive)
+    frames = kitti._timestamps(drive / "image_00" / "timestamps.txt")
+    np.testing.assert_allclose(t, frames - frames[0], atol=2e-6)
+    ok = np.all(np.isfinite(np.asarray(seq.gyro)), -1)
+    counts = ok.sum(1)
+    assert counts.sum() == 108 - int(np.sum(oxts_times >= frames[-1])) and set(counts) <= {0, 1, 2}
+    assert counts.max() == 2 and counts.min() == 0  # synced stamps jitter by +-5 ms around the frames
+    # Padding after the real samples: in every block the valid rows come first.
+    assert np.all(np.sort(~ok, axis=1) == ~ok)
+    # The INS's own pitch and roll are kept (against gravity), not made relative to frame 0.
+    nearest = np.abs(oxts_times[None, :] - frames[:, None]).argmin(1)
+    np.testing.assert_allclose(np.asarray(seq.pitch_roll), oxts[nearest][:, [4, 3]], atol=1e-5)
+    assert float(seq.planar[0, 2]) == pytest.approx(0.0, abs=1e-6)
+    resampled = kitti.read_raw(drive, samples_per_frame=1)
+    assert bool(np.all(np.isfinite(np.asarray(resampled.gyro[1:-1]))))
+
+
+def test_published_calibration_chain_is_a_small_rotation(reference_data):
+    t = kitti.imu_to_rectified_camera(reference_data / RAW / "calib")
+    from jbevo.data.kitti_frames import body_from_camera_rotation
+
+    r = body_from_camera_rotation(t[:3, :3])
+    angle = np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1)))
+    assert 0.3 < angle < 1.5
