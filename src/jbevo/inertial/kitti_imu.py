@@ -1,0 +1,96 @@
+"""The real KITTI odometry IMU made ready for a filter: each recording day's calibration (fitted
+on that day's training drives), applied, resampled into frame blocks, and the ground truth
+levelled by the gravity the drive's own accelerometer finds.
+
+KITTI recorded its odometry sequences on two days and calibrated its rig per day: 00-02 on
+2011_10_03, 04-10 on 2011_09_30 (03's raw data is not public, so it has no IMU). A day's
+:func:`~jbevo.inertial.calibration.calibrate` uses only its drives among 00-08
+(:data:`jbevo.data.splits.KITTI_TRAIN`), so 09 and 10 are never fitted on. Frames are timed at
+:data:`FRAME_STEP_S` (the mean step of sequence 00's ``times.txt``; the gyro scale absorbs the
+0.3 % by which other sequences differ).
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from jbevo.data.imu_stream import resample_blocks
+from jbevo.data.kitti import read_kitti_imu
+from jbevo.data.kitti_frames import body_poses_from_kitti
+from jbevo.data.pose_files import read_kitti
+from jbevo.data.splits import KITTI_TRAIN
+from jbevo.inertial import calibration as cal
+
+#: KITTI's raw recording day of each odometry sequence with a public IMU.
+RECORDING_DAYS = {"2011_10_03": ("00", "01", "02"), "2011_09_30": ("04", "05", "06", "07", "08", "09", "10")}
+#: Frame step (s) for sequences read without their ``times.txt``.
+FRAME_STEP_S = 0.10365
+#: IMU samples per frame block (the published rows: 10 per frame).
+SAMPLES_PER_FRAME = 10
+
+
+class CalibratedImuDrive(NamedTuple):
+    """A drive's levelled truth and its calibrated IMU in frame blocks (block ``t``: the frame
+    interval before frame ``t``; body frame; NaN rows outside the IMU's span)."""
+
+    frame_times: np.ndarray  # (N,)
+    body_poses: np.ndarray  # (N, 4, 4) T_world_body, world levelled against gravity
+    imu_times: np.ndarray  # (N, S)
+    gyro: np.ndarray  # (N, S, 3)
+    accel: np.ndarray  # (N, S, 3)
+    gravity: cal.Gravity  # the drive's world tilt (before levelling)
+
+
+def recording_day(name: str) -> str:
+    """The recording day of odometry sequence ``name`` (``ValueError`` for one without IMU)."""
+    for day, names in RECORDING_DAYS.items():
+        if name in names:
+            return day
+    raise ValueError(
+        f"KITTI sequence {name!r} has no public IMU (known: {', '.join(n for v in RECORDING_DAYS.values() for n in v)})"
+    )
+
+
+def calibration_drive(poses_folder: str | Path, imu_folder: str | Path, name: str) -> cal.CalibrationDrive:
+    """Sequence ``name``'s ground truth (``poses_folder/NN.txt``) and IMU (``imu_folder/NN.mat``)."""
+    path = Path(poses_folder) / f"{name}.txt"
+    if not path.is_file():
+        raise FileNotFoundError(f"no KITTI pose file {path}")
+    body = body_poses_from_kitti(read_kitti(path).poses)
+    t = FRAME_STEP_S * np.arange(len(body))
+    return cal.CalibrationDrive(t, body, read_kitti_imu(Path(imu_folder) / f"{name}.mat", t))
+
+
+@functools.cache
+def day_calibration(poses_folder: str, imu_folder: str, day: str, groups: int = 0) -> cal.ImuCalibration:
+    """The calibration of ``day``'s IMU from its drives among 00-08 (cached per process;
+    ``groups`` for the jackknife, 0: none)."""
+    names = [n for n in RECORDING_DAYS[day] if n in KITTI_TRAIN]
+    return cal.calibrate([calibration_drive(poses_folder, imu_folder, n) for n in names], groups=groups)
+
+
+def calibrated_drive(
+    poses_folder: str | Path, imu_folder: str | Path, name: str, calibration: cal.ImuCalibration | None = None
+) -> CalibratedImuDrive:
+    """Sequence ``name`` with its day's calibration (or ``calibration``) applied."""
+    drive = calibration_drive(poses_folder, imu_folder, name)
+    c = calibration or day_calibration(str(poses_folder), str(imu_folder), recording_day(name))
+    gravity = cal.gravity_up(drive, c)
+    times, gyro, accel = resample_blocks(cal.apply(drive.imu, c), drive.frame_times, SAMPLES_PER_FRAME)
+    return CalibratedImuDrive(drive.frame_times, cal.level_poses(drive.body_poses, gravity.up), times, gyro, accel, gravity)
+
+
+__all__ = [
+    "FRAME_STEP_S",
+    "RECORDING_DAYS",
+    "SAMPLES_PER_FRAME",
+    "CalibratedImuDrive",
+    "calibrated_drive",
+    "calibration_drive",
+    "day_calibration",
+    "recording_day",
+]
