@@ -1,8 +1,10 @@
 """The KITTI-style odometry experiment (after the BEVO paper): train on sequences 00-07, select
 the checkpoint on 08, test on 09 and 10, here with the synthetic world driven by the real KITTI
-ground-truth motion and a simulated ADIS16448 IMU (or real KITTI data with ``--kitti-root``).
+ground-truth motion and a simulated ADIS16448 IMU, or with ``--real-imu`` the real KITTI IMU
+(calibrated per recording day on 00-08, the frames rendered at the attitude it sees; 03 has no
+IMU and is left out of training), or real KITTI data with ``--kitti-root`` (and ``--kitti-imu``).
 
-    python experiments/kitti_odometry.py --reference $JBEVO_REFERENCE_DATA [--seeds 0 1 2] [--epochs 3]
+    python experiments/kitti_odometry.py --reference $JBEVO_REFERENCE_DATA [--seeds 0 1 2] [--epochs 3] [--real-imu]
 
 KITTI camera 0 at full size, a 256 x 256 BEV at 0.1 m/px from 4 m, BEVO with the band geometry.
 Each training seed (the rendering's and IMU's noise, and the shuffling) trains on the first
@@ -13,8 +15,8 @@ every variant from the true attitude and speed at frame 0 (the devkit's trajecto
 together), and scored with the devkit (100-800 m; 09+10 pools both sequences' segments).
 Variants: BEVO learned (each seed), BEVO hand-set with and without bands, DPC with zero
 pitch/roll (no IMU) with and without bands, accelerometer-only attitude, and the true attitude
-(an upper bound). Writes ``experiments/results/kitti_odometry.json`` and a trajectory figure per
-test sequence.
+(an upper bound). Writes ``experiments/results/kitti_odometry.json`` (``kitti_odometry_real_imu.json``
+with the real IMU) and a trajectory figure per test sequence.
 """
 
 from __future__ import annotations
@@ -69,6 +71,17 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--reference", type=Path, default=os.environ.get("JBEVO_REFERENCE_DATA"))
     p.add_argument("--kitti-root", type=Path, help="real KITTI odometry data instead of the synthetic world")
+    p.add_argument(
+        "--kitti-imu",
+        type=Path,
+        help="with --kitti-root: the folder of the real KITTI IMU files NN.mat (03 has none: not trained on)",
+    )
+    p.add_argument(
+        "--real-imu",
+        action="store_true",
+        help="the synthetic world with the real KITTI IMU (reference kitti_odom/imu, calibrated per day on 00-08; 03 has none: "
+        "not trained on); writes kitti_odometry_real_imu.json",
+    )
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--epochs", type=int, default=3)
     p.add_argument("--frames", type=int, default=500, help="training and validation frames per sequence (0: all)")
@@ -80,12 +93,18 @@ def main(argv=None) -> int:
     dataset = "kitti" if args.kitti_root else "kitti-synthetic"
     poses = None if args.kitti_root else args.reference / "kitti_odom" / "gt_poses"
     source = ["--kitti-root", str(args.kitti_root)] if args.kitti_root else ["--kitti-poses", str(poses)]
+    if args.real_imu and not args.kitti_root:
+        args.kitti_imu = args.reference / "kitti_odom" / "imu"
+    if args.kitti_imu:
+        source += ["--kitti-imu", str(args.kitti_imu)]
+    fit = [f"{i:02d}" for i in range(8) if not (args.kitti_imu and i == 3)]
+    record = "kitti_odometry_real_imu" if args.kitti_imu else "kitti_odometry"
     grid = BevGrid(0.1, (256, 256), near=4.0)
 
     learned, training = {}, {}
-    seqs = load_sequences(dataset, list(TEST), 0, poses, args.kitti_root, "kitti", seed=900)
+    seqs = load_sequences(dataset, list(TEST), 0, poses, args.kitti_root, "kitti", seed=900, kitti_imu=args.kitti_imu)
     for seed in args.seeds:
-        run = args.out / "kitti_odometry_run" / f"seed{seed}"
+        run = args.out / f"{record}_run" / f"seed{seed}"
         t0 = time.perf_counter()
         train.main(
             [
@@ -102,7 +121,7 @@ def main(argv=None) -> int:
                 "4.0",
                 "--bands",
                 "--train",
-                *[f"{i:02d}" for i in range(8)],
+                *fit,
                 "--val",
                 "08",
                 "--epochs",
@@ -141,17 +160,18 @@ def main(argv=None) -> int:
             for label in ("BEVO hand-set", "BEVO hand-set without bands", "true attitude (upper bound)")
         }
         trajectory_top_view(
-            args.out / f"kitti_odometry_{name}.png",
+            args.out / f"{record}_{name}.png",
             np.asarray(seqs[i].planar),
             {k: np.asarray(v.poses) for k, v in curves.items()},
-            title=f"sequence {name} ({dataset})",
+            title=f"sequence {name} ({dataset}{', real IMU' if args.kitti_imu else ''})",
         )
     strip = lambda rows: {k: {kk: vv for kk, vv in v.items() if kk != "_outputs"} for k, v in rows.items()}
     write_json_atomic(
-        args.out / "kitti_odometry.json",
+        args.out / f"{record}.json",
         {
             "dataset": dataset,
-            "train": [f"{i:02d}" for i in range(8)],
+            "imu": "real KITTI IMU, calibrated per recording day on 00-08" if args.kitti_imu else "simulated ADIS16448",
+            "train": fit,
             "checkpoint_selection": "08, whole, warm start",
             "test": list(TEST),
             "frames_per_training_sequence": args.frames,

@@ -119,3 +119,25 @@ def test_kitti_defaults_select_on_08_and_never_on_a_training_sequence(tmp_path, 
     argv = ["--dataset", "kitti", "--kitti-root", str(tmp_path), "--train", "00", "08", "--val", "08"]
     assert train.main(argv) == 1
     assert "sequences 08 would both train and select the checkpoint" in capsys.readouterr().err
+
+
+def test_kitti_without_imu_is_refused_not_filtered_on_zeros(tmp_path, capsys):
+    from jbevo.data import kitti
+    from jbevo.data.synthetic.sequences import procedural_sequence
+    from jbevo.data.synthetic.world import World
+    from jbevo.geometry import camera as cam
+
+    seq = procedural_sequence(
+        7, 6, camera=cam.Camera(60.0, 60.0, 47.5, 15.5, (32, 96), 1.65), world=World.create("town02", size=256)
+    )
+    for name in ("00", "08"):
+        kitti.write_odometry(seq, tmp_path, name)
+    assert train.main(["--dataset", "kitti", "--kitti-root", str(tmp_path), "--train", "00", "--val", "08"]) == 1
+    err = capsys.readouterr().err
+    assert "sequences 00, 08 hold no IMU samples" in err and "--kitti-imu" in err
+    argv = ["--dataset", "kitti", "--kitti-root", str(tmp_path), "--sequences", "00", "--out", str(tmp_path / "e")]
+    assert evaluate.main(argv) == 1
+    assert "--attitude zero|truth" in capsys.readouterr().err
+    missing = argv + ["--kitti-imu", str(tmp_path / "imu")]
+    assert evaluate.main(missing) == 1
+    assert "missing IMU file" in capsys.readouterr().err

@@ -27,3 +27,18 @@ def test_window_zero_batches_the_whole_sequences(seqs):
     assert batch.images.shape[:2] == (2, 12)
     with pytest.raises(ValueError, match="sequence 2 has"):
         training_windows(seqs, 0)
+
+
+def test_a_runtime_check_inside_the_model_ends_training_as_divergence():
+    import equinox as eqx
+    import jax.numpy as jnp
+    import numpy as np
+
+    from jbevo.training.loop import TrainingDiverged, run_epoch
+
+    @eqx.filter_jit
+    def step(params, opt_state, batch):
+        return params, opt_state, eqx.error_if(jnp.sum(batch), jnp.any(batch > 0), "register: image a contains NaN or inf")
+
+    with pytest.raises(TrainingDiverged, match=r"epoch 2, step 0 \(register: image a contains NaN or inf\)"):
+        run_epoch(step, 0, 0, jnp.ones((4, 2)), 2, np.random.default_rng(0), "epoch 2")

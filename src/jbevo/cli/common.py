@@ -57,6 +57,23 @@ def best_checkpoint(out: Path):
     return model, epoch
 
 
+def require_imu(seqs: Sequence, names: Sequence[str], attitude: str, alternative: str = "") -> None:
+    """Refuse to run an attitude source that reads the IMU (``filter``, ``accel``) on sequences
+    without IMU samples (a KITTI odometry folder read without ``--kitti-imu``), instead of
+    filtering zeros; ``alternative`` names another way out (e.g. an ``--attitude`` choice)."""
+    from jbevo.data.kitti import has_imu
+
+    if attitude not in ("filter", "accel"):
+        return
+    missing = [n for n, q in zip(names, seqs) if not has_imu(q)]
+    if missing:
+        raise CommandError(
+            f"sequence{'s' if len(missing) > 1 else ''} {', '.join(missing)} hold{'' if len(missing) > 1 else 's'} no IMU "
+            f"samples, which the {attitude!r} attitude needs: pass --kitti-imu DIR (the KITTI odometry IMU files NN.mat)"
+            + (f" or {alternative}" if alternative else "")
+        )
+
+
 def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace], object], argv: Sequence[str] | None) -> int:
     """Parse ``argv`` (exit 2 on a usage error) and run ``command``; a :class:`CommandError`
     prints ``prog: error: message`` and gives 1."""
@@ -130,6 +147,11 @@ def dataset_options(default_frames: int) -> argparse.ArgumentParser:
     p.add_argument("--dataset", choices=DATASETS, default="synthetic")
     p.add_argument("--kitti-poses", type=Path, help="folder of KITTI pose files NN.txt (kitti-synthetic)")
     p.add_argument("--kitti-root", type=Path, help="KITTI odometry root folder (kitti)")
+    p.add_argument(
+        "--kitti-imu",
+        type=Path,
+        help="folder of the KITTI odometry IMU files NN.mat (kitti, kitti-synthetic): the real IMU the attitude filter runs on",
+    )
     p.add_argument(
         "--frames",
         type=non_negative_int,

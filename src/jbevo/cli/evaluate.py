@@ -2,7 +2,7 @@
 
     python -m jbevo.evaluate --checkpoint runs/bevo                    # built-in synthetic drives
     python -m jbevo.evaluate --dataset kitti-synthetic --kitti-poses $JBEVO_REFERENCE_DATA/kitti_odom/gt_poses --sequences 09 10
-    python -m jbevo.evaluate --dataset kitti --kitti-root /data/kitti/odometry --sequences 09 10 --checkpoint runs/bevo
+    python -m jbevo.evaluate --dataset kitti --kitti-root /data/kitti/odometry --kitti-imu $JBEVO_REFERENCE_DATA/kitti_odom/imu --sequences 09 10 --checkpoint runs/bevo
 
 Sequences of equal length are stacked and run in one vmapped, jitted call, sharded along the
 batch over all local devices (``jax.sharding``; on a CPU, ``XLA_FLAGS=--xla_force_host_platform_device_count=4``
@@ -84,8 +84,17 @@ def evaluate(args: argparse.Namespace) -> int:
         names = list(args.sequences or splits.KITTI_TEST)
     with common.reading(f"the {args.dataset} dataset"):
         seqs = load_sequences(
-            args.dataset, names, args.frames, args.kitti_poses, args.kitti_root, args.camera, args.town, seed=args.seed
+            args.dataset,
+            names,
+            args.frames,
+            args.kitti_poses,
+            args.kitti_root,
+            args.camera,
+            args.town,
+            seed=args.seed,
+            kitti_imu=args.kitti_imu,
         )
+    common.require_imu(seqs, names, args.attitude, "--attitude zero|truth")
     if args.dataset == "synthetic":
         names = [f"synthetic_{n}" for n in names]
     lengths = segment_lengths(args.dataset, args.frames)

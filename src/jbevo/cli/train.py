@@ -2,7 +2,7 @@
 
     python -m jbevo.train                       # the built-in synthetic drives
     python -m jbevo.train --dataset kitti-synthetic --kitti-poses poses/ --window 96 --start warm --val-start warm
-    python -m jbevo.train --dataset kitti --kitti-root /data/kitti/odometry --train 00 01 --val 09 --window 96 --start warm
+    python -m jbevo.train --dataset kitti --kitti-root /data/kitti/odometry --kitti-imu $JBEVO_REFERENCE_DATA/kitti_odom/imu --train 00 01 --val 08 --window 96 --start warm
 
 Training runs on windows of ``--window`` frames (stride half a window; 0, the default: the whole
 sequences), shuffled into batches of ``--batch`` (vmapped), each started from a cold start (the
@@ -55,11 +55,17 @@ def load_datasets(args: argparse.Namespace) -> tuple[list[Sequence], list[Sequen
         if shared := sorted(set(train_names) & set(val_names)):
             raise common.CommandError(f"sequences {', '.join(shared)} would both train and select the checkpoint")
     options = dict(
-        frames=args.frames, kitti_poses=args.kitti_poses, kitti_root=args.kitti_root, camera=args.camera, town=args.town
+        frames=args.frames,
+        kitti_poses=args.kitti_poses,
+        kitti_root=args.kitti_root,
+        kitti_imu=args.kitti_imu,
+        camera=args.camera,
+        town=args.town,
     )
     with common.reading(f"the {args.dataset} dataset"):
         train = load_sequences(args.dataset, train_names, seed=args.seed, **options)
         val = load_sequences(args.dataset, val_names, seed=args.seed + 100, **options)
+    common.require_imu(train + val, list(train_names) + list(val_names), "filter")
     return train, val, segment_lengths(args.dataset, args.frames)
 
 

@@ -24,17 +24,21 @@ def load_sequences(
     camera: str = "small",
     town: str = "town01",
     seed: int = 0,
+    kitti_imu: Path | None = None,
 ) -> list[Sequence]:
     """The sequences ``names`` of ``dataset``. For ``synthetic``, ``names`` are seeds (one
     procedural drive each, ``frames`` frames); for ``kitti-synthetic`` KITTI sequence names whose
     pose files are in ``kitti_poses`` (``frames`` caps the length, 0 = all; ``camera`` small or
-    kitti); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is missing."""
+    kitti; with ``kitti_imu``, the folder of the KITTI odometry IMU files, the real IMU, calibrated
+    per recording day on 00-08, and frames rendered at the attitude it sees:
+    :func:`jbevo.data.synthetic.sequences.kitti_sequence`); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is missing."""
     if dataset == "synthetic":
         return [builtin_dataset(frames, 1, town, int(n))[0] for n in progress(names, "rendering synthetic drives")]
     if dataset == "kitti-synthetic":
         if kitti_poses is None:
             raise ValueError("the kitti-synthetic dataset needs kitti_poses, the folder of KITTI pose files NN.txt")
         from jbevo.data.pose_files import read_kitti
+        from jbevo.inertial.kitti_imu import calibrated_drive
 
         world = World.create(town)
         cam = small_camera() if camera == "small" else Camera.kitti()
@@ -45,14 +49,15 @@ def load_sequences(
                 raise ValueError(f"no KITTI pose file {path}")
             poses = read_kitti(path).poses
             n = min(frames, len(poses) - 1) if frames else None
-            out.append(kitti_sequence(poses, 0, n, camera=cam, world=world, seed=seed + i))
+            real = None if kitti_imu is None else calibrated_drive(kitti_poses, kitti_imu, name)
+            out.append(kitti_sequence(poses, 0, n, camera=cam, world=world, seed=seed + i, real_imu=real))
         return out
     if dataset == "kitti":
         if kitti_root is None:
             raise ValueError("the kitti dataset needs kitti_root, a KITTI odometry folder")
         from jbevo.data.kitti import read_odometry
 
-        return [read_odometry(kitti_root, n) for n in progress(names, "reading KITTI sequences")]
+        return [read_odometry(kitti_root, n, imu=kitti_imu) for n in progress(names, "reading KITTI sequences")]
     raise ValueError(f"unknown dataset {dataset!r}; known: {DATASETS}")
 
 

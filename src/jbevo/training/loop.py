@@ -36,7 +36,8 @@ class TrainingDiverged(RuntimeError):
 
 def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.Generator, label: str):
     """One pass over the ``windows`` (a batched pytree) in shuffled batches of ``batch``:
-    ``(params, opt_state, mean loss, steps)``. A non-finite loss raises :class:`TrainingDiverged`."""
+    ``(params, opt_state, mean loss, steps)``. A non-finite loss, or a runtime check inside the
+    model that meets a non-finite value, raises :class:`TrainingDiverged`."""
     n = jax.tree_util.tree_leaves(windows)[0].shape[0]
     order = rng.permutation(n)
     steps = max(1, n // batch)
@@ -45,7 +46,15 @@ def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.
     for i in bar:
         idx = order[i * batch : (i + 1) * batch]
         chunk = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows)
-        params, opt_state, loss = step(params, opt_state, chunk)
+        try:
+            params, opt_state, loss = step(params, opt_state, chunk)
+        except eqx.EquinoxRuntimeError as error:  # a check inside the model met a NaN state
+            marker = "EquinoxRuntimeError: "
+            lines = [line.split(marker, 1)[1] for line in str(error).splitlines() if marker in line]
+            reason = lines[0] if lines else "a runtime check failed"
+            raise TrainingDiverged(
+                f"the model produced non-finite values at {label}, step {i} ({reason}); lower the learning rate"
+            ) from None
         if not np.isfinite(float(loss)):
             raise TrainingDiverged(f"the loss became {float(loss)} at {label}, step {i}; lower the learning rate")
         losses.append(float(loss))

@@ -22,6 +22,7 @@ from jbevo.data.synthetic.trajectories import kitti_drive, procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.camera import Camera
 from jbevo.geometry.euler import rotation_zyx
+from jbevo.inertial.kitti_imu import CalibratedImuDrive
 
 
 def small_camera(scale: float = 1 / 3, height: float = 1.65) -> Camera:
@@ -46,6 +47,14 @@ def _frames(world, camera, poses, times, obstacles, keys, condition: Condition):
     return jax.lax.map(one, (poses, times, keys), batch_size=2)
 
 
+def _condition(condition: Condition | str) -> Condition:
+    if isinstance(condition, str):
+        if condition not in CONDITIONS:
+            raise ValueError(f"unknown condition {condition!r}; known: {sorted(CONDITIONS)}")
+        return CONDITIONS[condition]
+    return condition
+
+
 def make_sequence(
     world: World,
     camera: Camera,
@@ -65,10 +74,7 @@ def make_sequence(
     """
     frame_times = np.asarray(frame_times, float)
     body_poses = np.asarray(body_poses, float)
-    if isinstance(condition, str):
-        if condition not in CONDITIONS:
-            raise ValueError(f"unknown condition {condition!r}; known: {sorted(CONDITIONS)}")
-        condition = CONDITIONS[condition]
+    condition = _condition(condition)
     if len(frame_times) < 2 or body_poses.shape != (len(frame_times), 4, 4):
         raise ValueError(f"need >= 2 frame times and poses of shape (N, 4, 4); got {frame_times.shape}, {body_poses.shape}")
     interval = np.diff(frame_times)
@@ -81,17 +87,45 @@ def make_sequence(
     poses = np.tile(np.eye(4), (t, 1, 1))
     poses[:, :3, :3] = rotation_zyx(imu.frame_euler[1:])
     poses[:, :3, 3] = imu.frame_position[1:]
+    block = (t, s)
+    return render_sequence(
+        world,
+        camera,
+        frame_times,
+        poses,
+        imu.times.reshape(block),
+        imu.gyro.reshape(*block, 3),
+        imu.accel.reshape(*block, 3),
+        condition,
+        seed,
+    )
+
+
+def render_sequence(
+    world: World,
+    camera: Camera,
+    frame_times: np.ndarray,
+    poses: np.ndarray,
+    imu_times: np.ndarray,
+    gyro: np.ndarray,
+    accel: np.ndarray,
+    condition: Condition | str = "day",
+    seed: int = 0,
+) -> Sequence:
+    """A Sequence whose images are rendered at ``poses`` (``T``, the frames of ``frame_times[1:]``;
+    ``frame_times[0]`` is the time the IMU starts) with the given IMU blocks ``(T, S)``."""
+    condition = _condition(condition)
+    t = len(poses)
     obstacles = place_obstacles(poses, condition.obstacles, seed) if condition.obstacles else None
     keys = jax.random.split(jax.random.PRNGKey(seed), t)
     times = jnp.asarray(frame_times[1:] - frame_times[0], jnp.float32)
     images = _frames(world, camera, jnp.asarray(poses, jnp.float32), times, obstacles, keys, condition)
-    block = (t, s)
     seq = Sequence(
         images=images,
         frame_times=jnp.asarray(frame_times[1:], jnp.float32),
-        imu_times=jnp.asarray(imu.times.reshape(block), jnp.float32),
-        gyro=jnp.asarray(imu.gyro.reshape(*block, 3), jnp.float32),
-        accel=jnp.asarray(imu.accel.reshape(*block, 3), jnp.float32),
+        imu_times=jnp.asarray(imu_times, jnp.float32),
+        gyro=jnp.asarray(gyro, jnp.float32),
+        accel=jnp.asarray(accel, jnp.float32),
         camera=camera,
         poses=jnp.asarray(poses, jnp.float32),
     )
@@ -124,16 +158,41 @@ def kitti_sequence(
     imu_noise: ImuNoise = ADIS16448,
     seed: int = 0,
     world: World | None = None,
+    real_imu: CalibratedImuDrive | None = None,
 ) -> Sequence:
     """The synthetic world driven by real KITTI motion (``T_world_cam0`` poses, e.g. read with
-    :func:`jbevo.data.pose_files.read_kitti`): frames ``[start, start + frames)`` (all by default)."""
+    :func:`jbevo.data.pose_files.read_kitti`): frames ``[start, start + frames)`` (all by default).
+
+    With ``real_imu`` (the same sequence's real IMU, calibrated and levelled:
+    :func:`jbevo.inertial.kitti_imu.calibrated_drive`) the IMU is the real one and the frames are
+    rendered at the attitude it sees: the levelled ground truth's pitch and roll (the road's grade
+    and banking included) and heading, the x, y of the truth and :func:`kitti_drive`'s height, on
+    the real frame times; without it the IMU is simulated (``imu_noise``) from the level-road
+    motion of :func:`kitti_drive`."""
     world = World.create(town) if world is None else world
     camera = Camera.kitti() if camera is None else camera
     times, poses = kitti_drive(kitti_poses)
     stop = len(poses) if frames is None else start + frames + 1
     if start < 0 or stop > len(poses) or stop - start < 2:
         raise ValueError(f"frames [{start}, {stop - 1}) do not fit a trajectory of {len(poses)} poses (one extra starts the IMU)")
-    return make_sequence(world, camera, times[start:stop], poses[start:stop], condition, imu_noise, seed, smoothing=0.01)
+    if real_imu is None:
+        return make_sequence(world, camera, times[start:stop], poses[start:stop], condition, imu_noise, seed, smoothing=0.01)
+    if len(real_imu.frame_times) != len(poses):
+        raise ValueError(f"the real IMU drive has {len(real_imu.frame_times)} frames, the poses {len(poses)}")
+    rendered = np.array(real_imu.body_poses)
+    rendered[:, 2, 3] = poses[:, 2, 3]
+    frames_kept = slice(start + 1, stop)
+    return render_sequence(
+        world,
+        camera,
+        real_imu.frame_times[start:stop],
+        rendered[frames_kept],
+        real_imu.imu_times[frames_kept],
+        real_imu.gyro[frames_kept],
+        real_imu.accel[frames_kept],
+        condition,
+        seed,
+    )
 
 
 def builtin_dataset(frames: int = 120, sequences: int = 6, town: str = "town01", seed: int = 0) -> list[Sequence]:
@@ -143,4 +202,4 @@ def builtin_dataset(frames: int = 120, sequences: int = 6, town: str = "town01",
     return [procedural_sequence(seed + i, frames, town, world=world) for i in range(sequences)]
 
 
-__all__ = ["builtin_dataset", "kitti_sequence", "make_sequence", "procedural_sequence", "small_camera"]
+__all__ = ["builtin_dataset", "kitti_sequence", "make_sequence", "procedural_sequence", "render_sequence", "small_camera"]
