@@ -118,6 +118,142 @@ def attitude_synthetic() -> str:
     )
 
 
+ATTITUDE_REAL_ROWS = (
+    ("accelerometer tilt only", "accel_only", None),
+    ("gyro integration only", "gyro_only", None),
+    ("DUKF (pitch, roll)", "dukf_handset", "dukf_learned"),
+    ("DUKF + gyro bias", "dukf_gyro_bias_handset", "dukf_gyro_bias_learned"),
+    ("motion-compensated + bias", "motion_compensated_handset", "motion_compensated_learned"),
+    ("speed-aided (BEVO's)", "speed_aided_handset", "speed_aided_learned"),
+)
+PEER_NAMES = {"madgwick": "Madgwick", "mahony": "Mahony", "ekf": "EKF", "complementary": "complementary"}
+
+
+def attitude_real() -> str:
+    d = record("benchmarks/results/attitude_real.json")
+    rmse, centred, raw = d["rmse_deg"], d["rmse_deg_offset_removed"], d["rmse_deg_uncalibrated"]
+    rows = []
+    for name, hand, learned in ATTITUDE_REAL_ROWS:
+        rows.append(
+            [
+                name,
+                num(raw.get(hand), 3),
+                num(rmse[hand], 3),
+                num(rmse.get(learned) if learned else None, 3),
+                num(centred[learned or hand], 3),
+            ]
+        )
+    for key, name in PEER_NAMES.items():
+        peer = d["peers"][key]
+        rows.append(
+            [
+                f"`ahrs` {name} (gain {peer['gain']:g})",
+                "-",
+                num(peer["rmse_deg"], 3),
+                "-",
+                num(peer["rmse_deg_offset_removed"], 3),
+            ]
+        )
+    return table(
+        [
+            "pitch and roll RMSE on real 09 + 10 (deg)",
+            "uncalibrated, hand-set",
+            "hand-set",
+            "learned",
+            "learned, offsets removed",
+        ],
+        rows,
+    )
+
+
+def attitude_real_headline() -> str:
+    d = record("benchmarks/results/attitude_real.json")
+    rmse, raw = d["rmse_deg"], d["rmse_deg_uncalibrated"]
+    best = min(d["peers"], key=lambda k: d["peers"][k]["rmse_deg"])
+    rows = [
+        ["gyro integration only", num(raw["gyro_only"], 3), num(rmse["gyro_only"], 3)],
+        ["DUKF (pitch, roll), learned", "-", num(rmse["dukf_learned"], 3)],
+        ["speed-aided (BEVO's), hand-set", num(raw["speed_aided_handset"], 3), num(rmse["speed_aided_handset"], 3)],
+        ["speed-aided (BEVO's), learned", "-", num(rmse["speed_aided_learned"], 3)],
+        [f"best `ahrs` peer ({PEER_NAMES[best]}, gain tuned)", "-", num(d["peers"][best]["rmse_deg"], 3)],
+    ]
+    return table(["pitch and roll RMSE, real KITTI IMU, 09 + 10 (deg)", "uncalibrated", "calibrated"], rows)
+
+
+def attitude_real_calibration() -> str:
+    d = record("benchmarks/results/attitude_real.json")["calibration"]
+    rows = []
+    for day, c in d["per_day"].items():
+        sd = c["std"]
+        rot = ", ".join(f"{v:.2f} ± {e:.2f}" for v, e in zip(c["rotation_body_imu_deg"], sd["rotation_body_imu_deg"]))
+        rows.append(
+            [
+                f"{day} ({' '.join(c['fitted_on'])})",
+                rot,
+                f"{1000 * c['time_offset_s']:.1f} ± {1000 * sd['time_offset_s']:.1f}",
+                f"{c['gyro_scale']:.4f} ± {sd['gyro_scale']:.4f}",
+                ", ".join(f"{v:.3f}" for v in c["accel_bias_m_s2"][:2]),
+                ", ".join(f"{v:.2f}" for v in c["estimate_minus_published_deg"]),
+            ]
+        )
+    return table(
+        [
+            "recording day (fitted on)",
+            "mounting x, y, z (deg)",
+            "time offset (ms)",
+            "gyro scale",
+            "accel bias x, y (m/s^2)",
+            "minus published 2011_09_26 chain (deg)",
+        ],
+        rows,
+    )
+
+
+def attitude_world_tilt() -> str:
+    d = record("benchmarks/results/attitude_real.json")["calibration"]
+    return ", ".join(f"{n}: {t:.1f}" for n, t in d["world_tilt_deg"].items())
+
+
+def attitude_euroc() -> str:
+    d = record("benchmarks/results/attitude_real.json")["euroc"]
+    rmse = d["rmse_deg"]
+    rows = [
+        [name, num(rmse[hand], 2), num(rmse.get(learned) if learned else None, 2)]
+        for name, hand, learned in ATTITUDE_REAL_ROWS
+        if hand in rmse
+    ]
+    rows += [
+        [f"`ahrs` {n} (gain {d['peers'][k]['gain']:g})", num(d["peers"][k]["rmse_deg"], 2), "-"] for k, n in PEER_NAMES.items()
+    ]
+    return table(["pitch and roll RMSE on EuRoC V1_02, quarter 4 (deg)", "hand-set", "learned"], rows)
+
+
+def imu_noise_real() -> str:
+    n = record("benchmarks/results/attitude_real.json")["imu_noise"]
+    adis = n["adis16448"]
+    fmt = lambda values: ", ".join(f"{v:.1e}" for v in values)
+    rows = [
+        [
+            "gyro white noise (rad/s/sqrt(Hz))",
+            fmt(n["gyro_noise_density_rad_s_sqrt_hz"]),
+            f"{adis['gyro_noise_density_rad_s_sqrt_hz']:.1e}",
+        ],
+        [
+            "gyro bias random walk (rad/s^2/sqrt(Hz))",
+            "< " + fmt(n["gyro_random_walk_bound_rad_s2_sqrt_hz"]),
+            f"{adis['gyro_random_walk_rad_s2_sqrt_hz']:.1e}",
+        ],
+        ["gyro bias, spread between drives (rad/s)", fmt(n["gyro_bias_spread_rad_s"]), "-"],
+        [
+            "accel white noise (m/s^2/sqrt(Hz))",
+            fmt(n["accel_noise_density_m_s2_sqrt_hz"]),
+            f"{adis['accel_noise_density_m_s2_sqrt_hz']:.1e}",
+        ],
+        ["accel bias, spread between drives (m/s^2)", fmt(n["accel_bias_spread_m_s2"][:2]), "-"],
+    ]
+    return table(["", "KITTI OXTS RT3003 (x, y, z)", "ADIS16448 (EuRoC)"], rows)
+
+
 # ----------------------------------------------------------------------------- registration
 
 
@@ -407,6 +543,11 @@ TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
     "attitude_synthetic": attitude_synthetic,
+    "attitude_real": attitude_real,
+    "attitude_real_headline": attitude_real_headline,
+    "attitude_real_calibration": attitude_real_calibration,
+    "attitude_euroc": attitude_euroc,
+    "imu_noise_real": imu_noise_real,
     "registration_sets": registration_sets,
     "registration_peers": registration_peers,
     "bev_speed": bev_speed,
@@ -423,6 +564,7 @@ TABLES: dict[str, Callable[[], str]] = {
 }
 
 VALUES: dict[str, Callable[[], str]] = {
+    "attitude_world_tilt": attitude_world_tilt,
     "ukf_agreement": ukf_agreement,
     "builtin_best_epochs": builtin_best_epochs,
     "builtin_wins": builtin_wins,

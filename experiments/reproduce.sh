@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerate every committed record (benchmarks/results/*.json, experiments/results/*.json), then
 # the measured tables of the README and docs/ from them. Needs the bench extra
-# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about two hours on
+# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about three hours on
 # a 2-core CPU. Timings are of this machine: run nothing else beside it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -13,6 +13,7 @@ python benchmarks/bev.py
 python benchmarks/simulator.py
 python benchmarks/bevo.py
 python benchmarks/attitude.py
+python benchmarks/attitude_real.py
 python experiments/filtering_demo.py
 python experiments/reference_metrics.py
 python experiments/bands.py

@@ -14,7 +14,7 @@ from jbevo.cli import common
 from jbevo.data.pose_files import read_kitti
 from jbevo.data.sequence_file import save
 from jbevo.data.synthetic.conditions import CONDITIONS
-from jbevo.data.synthetic.imu import ADIS16448, NOISELESS
+from jbevo.data.synthetic.imu import IMU_PRESETS, NOISELESS
 from jbevo.data.synthetic.sequences import kitti_sequence, procedural_sequence, small_camera
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.camera import Camera
@@ -35,7 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="128x416 or 376x1241 (default: small for procedural, kitti for --kitti-poses)",
     )
-    p.add_argument("--noiseless-imu", action="store_true")
+    p.add_argument("--noiseless-imu", action="store_true", help="the same as --imu-noise noiseless")
+    p.add_argument("--imu-noise", choices=sorted(IMU_PRESETS), default="adis16448", help="the simulated IMU's noise preset")
     return p
 
 
@@ -43,7 +44,7 @@ def render(args: argparse.Namespace) -> int:
     """Render the sequence and write it."""
     camera_kind = args.camera or ("kitti" if args.kitti_poses else "small")
     camera = Camera.kitti() if camera_kind == "kitti" else small_camera()
-    noise = NOISELESS if args.noiseless_imu else ADIS16448
+    noise = NOISELESS if args.noiseless_imu else IMU_PRESETS[args.imu_noise]
     if args.kitti_poses:
         with common.reading(f"{args.kitti_poses}"):
             poses = read_kitti(args.kitti_poses).poses

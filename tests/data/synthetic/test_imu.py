@@ -74,3 +74,27 @@ def test_the_biases_are_returned_as_added():
     runs = [simulate_imu(t, poses, noise=ImuNoise(0.0, 0.0, 0.0, 3e-3), seed=s, smoothing=None) for s in range(40)]
     spread = np.std([r.accel_bias[-1] for r in runs])
     assert spread == pytest.approx(3e-3 * np.sqrt(t[-1]), rel=0.25)
+
+
+def test_kitti_oxts_preset_matches_its_record():
+    """The preset is the RMS over axes of what benchmarks/attitude_real.py measured (2 digits)."""
+    import json
+    from pathlib import Path
+
+    from jbevo.data.synthetic.imu import KITTI_OXTS
+
+    noise = json.loads((Path(__file__).parents[3] / "benchmarks" / "results" / "attitude_real.json").read_text())["imu_noise"]
+
+    def rms(values):
+        return float(np.sqrt(np.mean(np.square(values))))
+
+    expected = {
+        "gyro_noise_density": rms(noise["gyro_noise_density_rad_s_sqrt_hz"]),
+        "gyro_random_walk": rms(noise["gyro_random_walk_bound_rad_s2_sqrt_hz"]),
+        "accel_noise_density": rms(noise["accel_noise_density_m_s2_sqrt_hz"]),
+        "accel_random_walk": noise["adis16448"]["accel_random_walk_m_s3_sqrt_hz"],
+        "gyro_turn_on_bias": rms(noise["gyro_bias_spread_rad_s"]),
+        "accel_turn_on_bias": rms(noise["accel_bias_spread_m_s2"][:2]),
+    }
+    for name, value in expected.items():
+        assert getattr(KITTI_OXTS, name) == pytest.approx(value, rel=0.05), name

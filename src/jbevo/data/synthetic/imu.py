@@ -40,6 +40,15 @@ class ImuNoise:
 # 0.2 deg/s per axis (1 sigma), the order of a MEMS gyro's uncalibrated start-up offset.
 ADIS16448 = ImuNoise(1.6968e-4, 1.9393e-5, 2.0e-3, 3.0e-3, gyro_turn_on_bias=np.radians(0.2))
 NOISELESS = ImuNoise(0.0, 0.0, 0.0, 0.0)
+# KITTI's OXTS RT3003 as the real KITTI odometry IMU shows it (``imu_noise`` in
+# benchmarks/results/attitude_real.json, written by benchmarks/attitude_real.py; the RMS over the
+# three axes): white noise from the car's stops (engine vibration included), the gyro's bias random
+# walk at the upper bound its Allan deviation against the truth allows, the turn-on biases as the
+# spread of the per-drive estimates; the accelerometer's bias random walk is not observable
+# against the truth's twice-differentiated positions and is ADIS16448's.
+KITTI_OXTS = ImuNoise(4.3e-4, 4.2e-5, 8.6e-3, 3.0e-3, gyro_turn_on_bias=1.4e-4, accel_turn_on_bias=0.011)
+#: The presets by name (the commands' ``--imu-noise``).
+IMU_PRESETS = {"adis16448": ADIS16448, "kitti-oxts": KITTI_OXTS, "noiseless": NOISELESS}
 
 
 class ImuData(NamedTuple):
@@ -136,4 +145,4 @@ def _spline(t: np.ndarray, values: np.ndarray, smoothing: float | None):
     return _Spline([make_smoothing_spline(t, values[:, i], lam=smoothing) for i in range(values.shape[1])])
 
 
-__all__ = ["ADIS16448", "ImuData", "ImuNoise", "NOISELESS", "planar_body_velocity", "simulate_imu"]
+__all__ = ["ADIS16448", "IMU_PRESETS", "KITTI_OXTS", "NOISELESS", "ImuData", "ImuNoise", "planar_body_velocity", "simulate_imu"]
