@@ -112,11 +112,11 @@ def run(f: AttitudeFilter, s: dict, compensated: bool):
     return f(s["gyro"], s["accel"], s["initial"], s["velocity"] if compensated else None)
 
 
-def fit(f, loss, data, steps: int, lr: float):
-    """Adam on ``loss(f, data)`` over the array leaves of ``f``; the training RMSE every 25 steps.
-    ``data`` is an argument of the compiled step, not a constant baked into it."""
+def adam_step(loss, lr: float, f):
+    """``(step, state)``: a compiled Adam step ``step(f, state, data) -> (f, state, loss)`` on
+    ``loss(f, data)`` over the array leaves of ``f``, and its initial state. ``data`` is an
+    argument of the compiled step, not a constant baked into it."""
     opt = optax.adam(lr)
-    state = opt.init(eqx.filter(f, eqx.is_array))
 
     @eqx.filter_jit
     def step(f, state, data):
@@ -124,6 +124,12 @@ def fit(f, loss, data, steps: int, lr: float):
         updates, state = opt.update(grads, state)
         return eqx.apply_updates(f, updates), state, value
 
+    return step, opt.init(eqx.filter(f, eqx.is_array))
+
+
+def fit(f, loss, data, steps: int, lr: float):
+    """Adam on ``loss(f, data)`` (:func:`adam_step`); the training RMSE every 25 steps."""
+    step, state = adam_step(loss, lr, f)
     history = []
     for i in range(steps):
         f, state, value = step(f, state, data)
@@ -171,17 +177,28 @@ def rmse_deg(estimates: list[np.ndarray], truths: list[np.ndarray]) -> float:
     return float(np.degrees(np.sqrt(np.mean(err**2))))
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def options(doc: str, steps: int, record: str) -> argparse.ArgumentParser:
+    """The options the attitude benchmarks share (reference data, training, the stand-in's noise,
+    the record written)."""
+    parser = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, default=os.environ.get("JBEVO_REFERENCE_DATA"))
-    parser.add_argument("--steps", type=int, default=300)
+    parser.add_argument("--steps", type=int, default=steps)
     parser.add_argument("--lr", type=float, default=0.05)
     parser.add_argument("--window", type=int, default=1000)
     parser.add_argument("--speed-noise", type=float, default=0.05)
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "attitude.json")
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / record)
+    return parser
+
+
+def reference_data(args: argparse.Namespace) -> Path:
     if args.data is None:
-        raise SystemExit("set JBEVO_REFERENCE_DATA or pass --data (the folder holding kitti_odom/)")
+        raise SystemExit("set JBEVO_REFERENCE_DATA or pass --data (the reference-data folder)")
+    return args.data
+
+
+def main() -> None:
+    args = options(__doc__ or "", 300, "attitude.json").parse_args()
+    reference_data(args)
 
     t0 = time.time()
     train_seqs = [load_sequence(args.data, n, args.speed_noise) for n in TRAIN]

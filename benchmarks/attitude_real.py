@@ -32,8 +32,6 @@ the motion capture's ``q_RS``; quarters 1-2 train (and tune the peers), 3 select
 
 from __future__ import annotations
 
-import argparse
-import os
 import time
 import warnings
 from pathlib import Path
@@ -42,7 +40,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optax
 from scipy.spatial.transform import Rotation, Slerp
 
 import attitude as sim  # the simulated benchmark's runners (sets jax_enable_x64)
@@ -130,15 +127,7 @@ def scores(estimates: list, seqs: list[dict]) -> tuple[float, float]:
 def fit_selected(f, loss, data, validate, steps: int, lr: float, every: int = 25):
     """Adam on ``loss(f, data)``; every ``every`` steps the validation RMSE ``validate(f)`` (deg);
     returns the best-validating parameters (the hand-set ones are step 0's candidate)."""
-    opt = optax.adam(lr)
-    state = opt.init(eqx.filter(f, eqx.is_array))
-
-    @eqx.filter_jit
-    def step(f, state, data):
-        value, grads = eqx.filter_value_and_grad(loss)(f, data)
-        updates, state = opt.update(grads, state)
-        return eqx.apply_updates(f, updates), state, value
-
+    step, state = sim.adam_step(loss, lr, f)
     best, best_val, best_step, history = f, validate(f), 0, []
     for i in range(1, steps + 1):
         f, state, value = step(f, state, data)
@@ -434,17 +423,10 @@ def split(results: dict) -> tuple[dict, dict]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, default=os.environ.get("JBEVO_REFERENCE_DATA"))
-    parser.add_argument("--steps", type=int, default=600)
-    parser.add_argument("--lr", type=float, default=0.05)
-    parser.add_argument("--window", type=int, default=1000)
+    parser = sim.options(__doc__ or "", 600, "attitude_real.json")
     parser.add_argument("--euroc-window", type=int, default=100)
-    parser.add_argument("--speed-noise", type=float, default=0.05)
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "attitude_real.json")
     args = parser.parse_args()
-    if args.data is None:
-        raise SystemExit("set JBEVO_REFERENCE_DATA or pass --data (the folder holding kitti_odom/ and realdata/)")
+    sim.reference_data(args)
     t0 = time.time()
     results: dict = {"peer_convention_check_deg": convention_check()}
 
