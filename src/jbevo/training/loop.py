@@ -64,9 +64,10 @@ def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.
 
 def train_epochs(step, params, static, opt_state, windows: Any, batch: int, seed: int, progress: dict, epochs: int):
     """Run the epochs from ``progress["epoch"]`` up to ``epochs`` (:func:`run_epoch` each, the
-    shuffling seeded by ``seed`` and the epoch resumed from, so a resumed run shuffles as the
-    uninterrupted one would continue), counting them in ``progress``; after each, yield
-    ``(model, opt_state, mean loss)`` with the model rebuilt from ``static``."""
+    shuffling drawn from one generator seeded by ``seed`` plus the epoch started from: a resumed
+    run shuffles its epochs differently from an uninterrupted one), counting them in
+    ``progress``; after each, yield ``(model, opt_state, mean loss)`` with the model rebuilt from
+    ``static``."""
     rng = np.random.default_rng(seed + progress["epoch"])
     for epoch in range(progress["epoch"], epochs):
         params, opt_state, mean_loss, steps = run_epoch(
