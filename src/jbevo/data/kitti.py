@@ -43,7 +43,7 @@ from jbevo.data.kitti_frames import CAMERA_HEIGHT, body_poses_from_kitti, camera
 from jbevo.data.sequence import Sequence, check
 from jbevo.files import write_atomic, write_text_atomic
 from jbevo.geometry.camera import Camera
-from jbevo.geometry.euler import rotation_zyx
+from jbevo.geometry.euler import euler_zyx, rotation_zyx
 
 EARTH_RADIUS = 6378137.0
 _EPOCH = datetime(2011, 9, 26, 13, 0, 0)
@@ -147,13 +147,10 @@ def read_odometry(
         raise FileNotFoundError(f"missing sequence folder {folder}")
     images = _images(folder / "image_0")
     times = np.concatenate(_numbers(folder / "times.txt", 1))
-    calib = {}
-    for line in (folder / "calib.txt").read_text().splitlines() if (folder / "calib.txt").is_file() else []:
-        key, _, rest = line.partition(":")
-        calib[key.strip()] = rest
-    if "P0" not in calib:
+    calib = _calibration_rows(folder / "calib.txt") if (folder / "calib.txt").is_file() else {}
+    if calib.get("P0", np.array([])).size != 12:
         raise ValueError(f"{folder / 'calib.txt'} is missing or has no P0 line")
-    p0 = np.array([float(v) for v in calib["P0"].split()]).reshape(3, 4)
+    p0 = calib["P0"].reshape(3, 4)
     n = len(images)
     if len(times) != n:
         raise ValueError(f"{folder}: {n} images but {len(times)} times")
@@ -320,10 +317,10 @@ def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT, sam
         raise ValueError(f"{drive / 'image_00'}: {len(images)} images but {len(frame_times)} timestamps")
     oxts_times, oxts = read_oxts(drive)
     calib_file = _calibration_file(drive)
-    rows = {k.strip(): v for k, _, v in (line.partition(":") for line in calib_file.read_text().splitlines())}
-    if "P_rect_00" not in rows:
+    rows = _calibration_rows(calib_file)
+    if rows.get("P_rect_00", np.array([])).size != 12:
         raise ValueError(f"{calib_file} has no P_rect_00 line")
-    p = np.array([float(v) for v in rows["P_rect_00"].split()]).reshape(3, 4)
+    p = rows["P_rect_00"].reshape(3, 4)
     origin = frame_times[0]
     frame_times, oxts_times = frame_times - origin, oxts_times - origin
     stream = ImuStream(oxts_times, oxts[:, 17:20], oxts[:, 11:14]).check(str(drive / "oxts"))
@@ -335,15 +332,10 @@ def read_raw(drive_folder: str | Path, camera_height: float = CAMERA_HEIGHT, sam
     poses = oxts_poses(oxts)[nearest]
     # Position and heading relative to the first frame; pitch and roll stay the INS's own.
     first = np.eye(4)
-    first[:3, :3] = rotation_zyx(np.array([[euler_yaw(poses[0]), 0.0, 0.0]]))[0]
+    first[:3, :3] = rotation_zyx(np.array([[euler_zyx(poses[:1, :3, :3])[0, 0], 0.0, 0.0]]))[0]
     first[:3, 3] = poses[0, :3, 3]
     poses = np.linalg.inv(first) @ poses
     return _sequence(images, frame_times, imu_times, gyro, accel, _camera(p, images.shape[1:], camera_height), poses)
-
-
-def euler_yaw(pose: np.ndarray) -> float:
-    """The ZYX yaw of a pose's rotation."""
-    return float(np.arctan2(pose[1, 0], pose[0, 0]))
 
 
 def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0: float = 8.4) -> None:

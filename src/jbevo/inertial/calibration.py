@@ -111,11 +111,27 @@ def _cumulative(stream: ImuStream, values: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((1, values.shape[1])), np.cumsum(steps, 0)])
 
 
-def _integral(stream: ImuStream, cumulative: np.ndarray, start: np.ndarray, stop: np.ndarray) -> np.ndarray:
-    return np.stack(
-        [np.interp(stop, stream.times, cumulative[:, i]) - np.interp(start, stream.times, cumulative[:, i]) for i in range(3)],
-        -1,
-    )
+def _at(stream: ImuStream, cumulative: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """A cumulative integral over the stream's stamps at the times ``x`` (linear in between)."""
+    return np.stack([np.interp(x, stream.times, cumulative[:, i]) for i in range(3)], -1)
+
+
+class _Prepared(NamedTuple):
+    """What of a drive does not depend on the time offset, computed once: the gyro's integral
+    over the stamps, the specific force's integral integrated again, the truth's rotations."""
+
+    drive: CalibrationDrive
+    gyro_integral: np.ndarray  # (M, 3)
+    force_integral_twice: np.ndarray  # (M, 3)
+    rotation: np.ndarray  # (N - 1, 3) truth rotation vector over each frame interval
+
+
+def _prepare(drive: CalibrationDrive) -> _Prepared:
+    stream = drive.imu
+    r = drive.body_poses[:, :3, :3]
+    rotation = Rotation.from_matrix(np.einsum("nji,njk->nik", r[:-1], r[1:])).as_rotvec()
+    force = _cumulative(stream, stream.accel)
+    return _Prepared(drive, _cumulative(stream, stream.gyro), _cumulative(stream, force), rotation)
 
 
 class _Pairs(NamedTuple):
@@ -131,56 +147,39 @@ class _Pairs(NamedTuple):
     attitude: np.ndarray  # (J, 3, 3) R_wb at the interior frames
 
 
-def _truth_rotations(poses: np.ndarray) -> np.ndarray:
-    r = poses[:, :3, :3]
-    return Rotation.from_matrix(np.einsum("nji,njk->nik", r[:-1], r[1:])).as_rotvec()
-
-
-def _pairs(drive: CalibrationDrive, offset: float, frames: np.ndarray | None = None) -> _Pairs:
-    """Pairs of ``drive`` for a time offset; ``frames`` (a boolean mask over frames) selects the
+def _pairs(prepared: _Prepared, offset: float, frames: np.ndarray | None = None) -> _Pairs:
+    """Pairs of a drive for a time offset; ``frames`` (a boolean mask over frames) selects the
     intervals and interior frames kept (the jackknife)."""
+    drive = prepared.drive
     t = np.asarray(drive.frame_times, float)
     stream = drive.imu
     lo, hi = stream.times[0] + offset, stream.times[-1] + offset
-    cum_w = _cumulative(stream, stream.gyro)
     inside = (t[:-1] >= lo) & (t[1:] <= hi)
     if frames is not None:
         inside &= frames[:-1] & frames[1:]
-    g = _integral(stream, cum_w, t[:-1][inside] - offset, t[1:][inside] - offset)
-    rot = _truth_rotations(drive.body_poses)[inside]
-    cum_f = _cumulative(stream, stream.accel)
+    g = _at(stream, prepared.gyro_integral, t[1:][inside] - offset) - _at(stream, prepared.gyro_integral, t[:-1][inside] - offset)
     k = np.arange(1, len(t) - 1)
     ok = (t[k - 1] >= lo) & (t[k + 1] <= hi)
     if frames is not None:
         ok &= frames[k - 1] & frames[k] & frames[k + 1]
     k = k[ok]
     before, after = t[k] - t[k - 1], t[k + 1] - t[k]
-    force = _hat_integral(stream, cum_f, t[k - 1] - offset, t[k] - offset, t[k + 1] - offset)
+    # int f Lambda, Lambda rising from 0 at t_k-1 to 1 at t_k and falling to 0 at t_k+1, with FF
+    # the twice-integrated force: by parts, int_a^m f (x - a) / (m - a) = F(m) - (FF(m) - FF(a)) / (m - a)
+    # and int_m^b f (b - x) / (b - m) = (FF(b) - FF(m)) / (b - m) - F(m); their sum.
+    cc_a, cc_m, cc_b = (_at(stream, prepared.force_integral_twice, x - offset) for x in (t[k - 1], t[k], t[k + 1]))
+    force = (cc_b - cc_m) / after[:, None] - (cc_m - cc_a) / before[:, None]
     p = drive.body_poses[:, :3, 3]
     velocity_change = (p[k + 1] - p[k]) / after[:, None] - (p[k] - p[k - 1]) / before[:, None]
     return _Pairs(
         g,
         (t[1:] - t[:-1])[inside],
-        rot,
+        prepared.rotation[inside],
         force,
         0.5 * (before + after),
         velocity_change,
         drive.body_poses[k, :3, :3],
     )
-
-
-def _hat_integral(stream: ImuStream, cum: np.ndarray, a: np.ndarray, m: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``int f Lambda`` with ``Lambda`` rising linearly from 0 at ``a`` to 1 at ``m`` and falling to
-    0 at ``b``, from the cumulative integral ``cum`` of ``f`` (its own integral by trapezoid)."""
-    cc = _cumulative(stream, cum)
-
-    def at(c, x):
-        return np.stack([np.interp(x, stream.times, c[:, i]) for i in range(3)], -1)
-
-    # int_a^m f (x - a) / (m - a) = F(m) - (FF(m) - FF(a)) / (m - a) and
-    # int_m^b f (b - x) / (b - m) = (FF(b) - FF(m)) / (b - m) - F(m) (by parts): their sum.
-    cc_a, cc_m, cc_b = at(cc, a), at(cc, m), at(cc, b)
-    return (cc_b - cc_m) / (b - m)[:, None] - (cc_m - cc_a) / (m - a)[:, None]
 
 
 def _kabsch(body: np.ndarray, imu: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -253,12 +252,12 @@ def _solve(pairs: list[_Pairs], iterations: int = 12, use_accel: bool = True) ->
     return _Fit(r, scale, bias, gravity, accel_bias, gyro_rms, accel_rms)
 
 
-def _gyro_residual(drives, offset, masks) -> float:
+def _gyro_residual(drives: list[_Prepared], offset, masks) -> float:
     pairs = [_pairs(d, offset, m) for d, m in zip(drives, masks)]
     return _solve(pairs, iterations=3, use_accel=False).gyro_rms
 
 
-def _estimate(drives: list[CalibrationDrive], masks, search: tuple[float, float], grid: float) -> tuple[float, _Fit]:
+def _estimate(drives: list[_Prepared], masks, search: tuple[float, float], grid: float) -> tuple[float, _Fit]:
     lo, hi = search
     offsets = np.arange(lo, hi + grid / 2, grid)
     costs = [_gyro_residual(drives, o, masks) for o in offsets]
@@ -288,8 +287,9 @@ def calibrate(
         if not np.all(np.isfinite(d.body_poses)):
             raise ValueError(f"drive {i}: the ground truth holds NaN (calibration needs it everywhere)")
         d.imu.check(f"drive {i} IMU")
+    prepared = [_prepare(d) for d in drives]
     full = [None] * len(drives)
-    offset, fit = _estimate(drives, full, (-max_offset_s, max_offset_s), 0.01)
+    offset, fit = _estimate(prepared, full, (-max_offset_s, max_offset_s), 0.01)
     std = None
     if groups >= 2:
         sizes = [len(d.frame_times) for d in drives]
@@ -299,7 +299,7 @@ def calibrate(
         reps = []
         for g in range(groups):
             masks = [group[owner == i] != g for i in range(len(drives))]
-            o, f = _estimate(drives, masks, (offset - 0.02, offset + 0.02), 0.005)
+            o, f = _estimate(prepared, masks, (offset - 0.02, offset + 0.02), 0.005)
             rel = Rotation.from_matrix(f.rotation @ fit.rotation.T).as_rotvec()
             reps.append(np.concatenate([np.degrees(rel), [o, f.scale], f.gyro_bias, f.accel_bias]))
         reps = np.array(reps)
@@ -332,7 +332,7 @@ def gyro_residual_rates(drive: CalibrationDrive, calibration: ImuCalibration) ->
     """``(mid-interval times (K,), residual rates (K, 3))``: the truth's rotation over each frame
     interval minus the calibrated gyro's, over the interval (rad/s, body frame): the gyro's noise
     and bias drift and the truth's own noise, for :func:`jbevo.inertial.noise_fit.allan_deviation`."""
-    p = _pairs(drive, calibration.time_offset_s)
+    p = _pairs(_prepare(drive), calibration.time_offset_s)
     c = calibration
     predicted = c.gyro_scale * (p.gyro_integral - p.interval[:, None] * c.gyro_bias) @ c.rotation_body_imu.T
     t = np.asarray(drive.frame_times, float)
@@ -355,9 +355,10 @@ def gravity_up(drive: CalibrationDrive, calibration: ImuCalibration, groups: int
     truth's acceleration (the linear solve of :func:`calibrate` with the mounting and biases held
     fixed): the mean over the interior frames of ``R_wb R (f - b_a) - a``."""
     n = len(drive.frame_times)
+    prepared = _prepare(drive)
 
     def estimate(mask):
-        p = _pairs(drive, calibration.time_offset_s, mask)
+        p = _pairs(prepared, calibration.time_offset_s, mask)
         m = np.einsum("nij,jk->nik", p.attitude, calibration.rotation_body_imu)
         force = p.force_integral / p.hat_area[:, None] - calibration.accel_bias
         y = np.einsum("nij,nj->ni", m, force) - p.velocity_change / p.hat_area[:, None]
