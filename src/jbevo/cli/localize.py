@@ -128,6 +128,7 @@ def train(args: argparse.Namespace) -> int:
             "best_epoch": best_epoch,
             "learnable_parameters": model.num_learnable(),
             "epochs": progress_["epoch"],
+            "skipped_steps": progress_.get("skipped_steps", 0),
             "history": progress_["history"],
             "seconds": time.perf_counter() - t_start,
             "args": common.json_args(args),

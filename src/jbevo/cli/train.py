@@ -188,6 +188,7 @@ def train(args: argparse.Namespace) -> int:
             "whole_sequences": whole,
             "learnable_parameters": model.num_learnable(),
             "epochs": progress["epoch"],
+            "skipped_steps": progress.get("skipped_steps", 0),
             "history": progress["history"],
             "seconds": time.perf_counter() - t_start,
             "args": common.json_args(args),

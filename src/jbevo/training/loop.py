@@ -1,6 +1,13 @@
 """The optimisation loop that ``python -m jbevo.train`` and ``python -m jbevo.localize train``
 share: the optimizer and progress (or a resumed run), a jitted Adam step over vmapped windows,
-one shuffled epoch with a progress bar, and the best/last checkpoints."""
+one shuffled epoch with a progress bar, and the best/last checkpoints.
+
+A step whose gradient holds a NaN or infinity (a rare batch where a gross registration failure
+meets a degenerate corner of the recursion, while the loss itself is finite) is skipped: the
+parameters and Adam's moments stay as they were (``optax.apply_if_finite``), a warning names the
+step, and ``progress["skipped_steps"]`` counts it. After :data:`MAX_SKIPPED_IN_A_ROW` such steps
+in a row the update is applied, and the non-finite loss that follows ends the run as
+:class:`TrainingDiverged`."""
 
 from __future__ import annotations
 
@@ -15,6 +22,9 @@ import optax
 from tqdm import tqdm
 
 from jbevo.training import checkpoint
+
+#: Consecutive steps with a non-finite gradient that are skipped before the run gives up.
+MAX_SKIPPED_IN_A_ROW = 3
 
 
 def make_step(static: Any, optimizer: optax.GradientTransformation, loss: Callable[[Any, Any], jax.Array]):
@@ -34,15 +44,23 @@ class TrainingDiverged(RuntimeError):
     """The loss became NaN or infinite."""
 
 
+def skipped_steps(opt_state: Any) -> int:
+    """How many steps ``opt_state`` (of :func:`start_run`'s optimizer) has skipped for a
+    non-finite gradient; 0 for any other optimizer state."""
+    return int(getattr(opt_state, "total_notfinite", 0))
+
+
 def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.Generator, label: str):
     """One pass over the ``windows`` (a batched pytree) in shuffled batches of ``batch``:
     ``(params, opt_state, mean loss, steps)``. A non-finite loss, or a runtime check inside the
-    model that meets a non-finite value, raises :class:`TrainingDiverged`."""
+    model that meets a non-finite value, raises :class:`TrainingDiverged`; a step the optimizer
+    skipped for a non-finite gradient is reported on stderr."""
     n = jax.tree_util.tree_leaves(windows)[0].shape[0]
     order = rng.permutation(n)
     steps = max(1, n // batch)
     bar = tqdm(range(steps), desc=label, file=sys.stderr, leave=False, disable=None)
     losses = []
+    before = skipped_steps(opt_state)
     for i in bar:
         idx = order[i * batch : (i + 1) * batch]
         chunk = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows)
@@ -57,6 +75,9 @@ def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.
             ) from None
         if not np.isfinite(float(loss)):
             raise TrainingDiverged(f"the loss became {float(loss)} at {label}, step {i}; lower the learning rate")
+        if (skipped := skipped_steps(opt_state)) > before:
+            tqdm.write(f"{label}, step {i}: the gradient is not finite; the update was skipped", file=sys.stderr)
+        before = skipped
         losses.append(float(loss))
         bar.set_postfix(loss=f"{np.mean(losses[-10:]):.5f}")
     return params, opt_state, float(np.mean(losses)), steps
@@ -74,18 +95,20 @@ def train_epochs(step, params, static, opt_state, windows: Any, batch: int, seed
             step, params, opt_state, windows, batch, rng, f"epoch {epoch + 1}/{epochs}"
         )
         progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
+        progress["skipped_steps"] = skipped_steps(opt_state)
         yield eqx.combine(params, static), opt_state, mean_loss
 
 
 def start_run(model, out, lr: float, clip: float, resume: bool, best_key: str):
-    """The Adam optimizer (gradient clipped at global norm ``clip``) and its state for ``model``,
+    """The Adam optimizer (gradient clipped at global norm ``clip``; steps with a non-finite
+    gradient skipped, see the module docstring) and its state for ``model``,
     and the progress record; with ``resume``, all three from ``out/last.ckpt`` (which must hold
     a model of ``model``'s type). Returns ``(model, params, static, optimizer, opt_state,
     progress)``; ``progress[best_key]`` holds the best validation criterion so far."""
-    optimizer = optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr))
+    optimizer = optax.apply_if_finite(optax.chain(optax.clip_by_global_norm(clip), optax.adam(lr)), MAX_SKIPPED_IN_A_ROW)
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
-    progress = {"epoch": 0, "step": 0, best_key: None, "history": []}
+    progress = {"epoch": 0, "step": 0, "skipped_steps": 0, best_key: None, "history": []}
     out.mkdir(parents=True, exist_ok=True)
     if resume:
         loaded, opt_state, progress = checkpoint.load(out / "last.ckpt", opt_state)
@@ -115,4 +138,14 @@ def load_best(out):
     return model, progress.get("best_epoch", 0)
 
 
-__all__ = ["TrainingDiverged", "load_best", "make_step", "run_epoch", "save_epoch", "start_run", "train_epochs"]
+__all__ = [
+    "MAX_SKIPPED_IN_A_ROW",
+    "TrainingDiverged",
+    "load_best",
+    "make_step",
+    "run_epoch",
+    "save_epoch",
+    "skipped_steps",
+    "start_run",
+    "train_epochs",
+]
