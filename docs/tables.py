@@ -408,8 +408,12 @@ def bands() -> str:
     )
 
 
-def kitti_odometry() -> str:
-    d = record("experiments/results/kitti_odometry.json")
+KITTI_SIMULATED_IMU = "experiments/results/kitti_odometry.json"
+KITTI_REAL_IMU = "experiments/results/kitti_odometry_real_imu.json"
+
+
+def kitti_odometry(name: str = KITTI_SIMULATED_IMU) -> str:
+    d = record(name)
     tests = d["test"]
     seeds = seeds_of(d["learned"])
     header = ["method", *(f"{t} t_err (%)" for t in tests), "pooled t_err (%)", "pooled r_err (deg/100 m)"]
@@ -433,8 +437,8 @@ def kitti_odometry() -> str:
     return table(header, rows)
 
 
-def kitti_validation() -> str:
-    d = record("experiments/results/kitti_odometry.json")
+def kitti_validation(name: str = KITTI_SIMULATED_IMU) -> str:
+    d = record(name)
     rows = []
     for s in seeds_of(d["training"]):
         r = d["training"][s]
@@ -453,8 +457,8 @@ def kitti_validation() -> str:
     return table(["08 (validation)", "t_err (%)", "r_err (deg/100 m)", "ATE (m)", "motion RMSE (m)"], rows)
 
 
-def kitti_wins() -> str:
-    d = record("experiments/results/kitti_odometry.json")
+def kitti_wins(name: str = KITTI_SIMULATED_IMU) -> str:
+    d = record(name)
     seeds = seeds_of(d["learned"])
     hand = d["hand_set"]["BEVO hand-set"]["pooled"]["t_err_pct"]
     test = sum(d["learned"][s]["pooled"]["t_err_pct"] < hand for s in seeds)
@@ -557,6 +561,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "bands": bands,
     "kitti_odometry": kitti_odometry,
     "kitti_validation": kitti_validation,
+    "kitti_odometry_real_imu": lambda: kitti_odometry(KITTI_REAL_IMU),
+    "kitti_validation_real_imu": lambda: kitti_validation(KITTI_REAL_IMU),
     "localization_carla": localization_carla,
     "localization_aeroground": localization_aeroground,
     "localization_validation": localization_validation,
@@ -569,5 +575,6 @@ VALUES: dict[str, Callable[[], str]] = {
     "builtin_best_epochs": builtin_best_epochs,
     "builtin_wins": builtin_wins,
     "kitti_wins": kitti_wins,
+    "kitti_wins_real_imu": lambda: kitti_wins(KITTI_REAL_IMU),
     "localization_wins": localization_wins,
 }

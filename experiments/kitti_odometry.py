@@ -144,6 +144,7 @@ def main(argv=None) -> int:
         training[str(seed)] = {
             "seconds": time.perf_counter() - t0,
             "best_epoch": metrics["best_epoch"],
+            "skipped_steps": metrics.get("skipped_steps", 0),
             "validation_hand_set": metrics["before"],
             "validation_learned": metrics["after"],
         }

@@ -4,74 +4,16 @@ import jax.flatten_util
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from jbevo.data.synthetic.planar import simulate_planar_sequence
 from jbevo.filtering import ukf
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.unscented import MerweScaled
 from jbevo.geometry.angles import wrap_angle
+from tests.filtering.references import P0, Q, R, filterpy_localization, wrap_np
 
 # Exactness against independent references needs float64 (conftest's fixture).
 pytestmark = pytest.mark.usefixtures("float64")
-
-Q = np.diag([0.02, 0.01, 0.005]) ** 2
-R = np.diag([0.5, 0.5, 0.05]) ** 2
-P0 = np.diag([1.0, 1.0, 0.1]) ** 2
-
-
-def wrap_np(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
-def filterpy_localization(x0, increments, fixes, alpha, beta, kappa):
-    """filterpy 2.0's UKF on the localization model, with matching angle functions."""
-
-    def residual(a, b):
-        d = np.subtract(a, b)
-        d[2] = wrap_np(d[2])
-        return d
-
-    def add(x, dx):
-        s = np.add(x, dx)
-        s[2] = wrap_np(s[2])
-        return s
-
-    def mean(points, w):
-        m = w @ points
-        ref = points[0, 2]
-        m[2] = wrap_np(ref + w @ wrap_np(points[:, 2] - ref))
-        return m
-
-    def fx(x, dt, u):
-        c, s = np.cos(x[2]), np.sin(x[2])
-        return np.array([x[0] + c * u[0] - s * u[1], x[1] + s * u[0] + c * u[1], wrap_np(x[2] + u[2])])
-
-    points = MerweScaledSigmaPoints(3, alpha, beta, kappa, subtract=residual)
-    f = UnscentedKalmanFilter(
-        3,
-        3,
-        1.0,
-        lambda x: x,
-        fx,
-        points,
-        x_mean_fn=mean,
-        z_mean_fn=mean,
-        residual_x=residual,
-        residual_z=residual,
-        state_add=add,
-    )
-    f.x, f.P, f.Q, f.R = np.array(x0, float), P0.copy(), Q.copy(), R.copy()
-    out = {"mean": [], "cov": [], "pred_mean": [], "pred_cov": [], "ll": []}
-    for u, z in zip(increments, fixes):
-        f.predict(u=u)
-        out["pred_mean"].append(f.x.copy())
-        out["pred_cov"].append(f.P.copy())
-        f.update(z)
-        out["mean"].append(f.x.copy())
-        out["cov"].append(f.P.copy())
-        out["ll"].append(f.log_likelihood)
-    return {k: np.array(v) for k, v in out.items()}
 
 
 def run_localization(x0, seq, *, scheme=MerweScaled(), q=Q, r=R, **kw):

@@ -1,6 +1,6 @@
-"""Filtering: the unscented transform, the unscented Kalman filter as pure JAX functions (``jit``,
-``vmap``, ``grad``; exact missing-data handling), learnable noise covariances, the planar pose
-model, and the small dense linear algebra they run on.
+"""Filtering: the unscented transform, the unscented Kalman filter and RTS smoother as pure JAX
+functions (``jit``, ``vmap``, ``grad``; exact missing-data handling), learnable noise covariances,
+the planar pose model, and the small dense linear algebra they run on.
 
 Example::
 
@@ -12,9 +12,10 @@ Example::
     result = ukf.filter(planar_pose_model(), GaussianState(jnp.zeros(3), 0.1 * jnp.eye(3)), increments, fixes, q(), r())
 """
 
-from jbevo.filtering import linalg, noise, planar, ukf, unscented
+from jbevo.filtering import linalg, noise, planar, smoother, ukf, unscented
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
+from jbevo.filtering.smoother import SmootherResult, smooth
 from jbevo.filtering.ukf import FilterResult, GaussianState, StateSpaceModel, filter_blocks, linear_update, predict, update
 from jbevo.filtering.unscented import (
     Julier,
@@ -36,6 +37,7 @@ __all__ = [
     "Julier",
     "MerweScaled",
     "SigmaWeights",
+    "SmootherResult",
     "StateSpaceModel",
     "UnscentedResult",
     "circular_mean_fn",
@@ -47,6 +49,8 @@ __all__ = [
     "planar_pose_model",
     "predict",
     "sigma_points",
+    "smooth",
+    "smoother",
     "ukf",
     "unscented",
     "unscented_transform",
