@@ -2,7 +2,9 @@
 
 The BEVO+ localization model: state (x, y, yaw), control the body-frame odometry increment,
 measurement the pose itself with yaw wrapped; T = 5,000 steps; alpha = 1, beta = 2, kappa = 0;
-float64. The methods are timed in interleaved rounds (best of ``--repeats``), the whole
+float64. jbevo's covariance and square-root filters, and its filter plus unscented RTS smoother
+against dynamax's unscented Kalman smoother; and the square-root filter with its ``tria``
+(unrolled modified Gram-Schmidt) against the same filter with LAPACK's QR in its place. The methods are timed in interleaved rounds (best of ``--repeats``), the whole
 measurement repeated ``--runs`` times (the JSON keeps every run; its top-level figures are the
 medians over the runs). Writes ``benchmarks/results/ukf.json`` and prints a table.
 
@@ -27,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from jbevo.data.synthetic.planar import simulate_planar_sequence  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
-from jbevo.filtering import ukf  # noqa: E402
+from jbevo.filtering import smoother, sqrt_ukf, ukf  # noqa: E402
 from jbevo.filtering.planar import planar_pose_model  # noqa: E402
 from jbevo.filtering.unscented import MerweScaled  # noqa: E402
 from jbevo.geometry import sincos, wrap_angle  # noqa: E402
@@ -42,12 +44,14 @@ P0 = np.diag([1.0, 1.0, 0.1]) ** 2
 # --------------------------------------------------------------------------------- jbevo
 
 
-def make_jbevo(check_inputs: bool):
+def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False):
+    """jbevo's filter (``form``: :mod:`ukf` or :mod:`sqrt_ukf`), optionally followed by the RTS
+    smoother: ``run(x0, increments, fixes) -> (means, covariances or factors)``."""
     model = planar_pose_model()
     scheme = MerweScaled(ALPHA, BETA, KAPPA)
 
     def run(x0, increments, fixes):
-        res = ukf.filter(
+        res = form.filter(
             model,
             ukf.GaussianState(x0, jnp.asarray(P0)),
             increments,
@@ -57,8 +61,27 @@ def make_jbevo(check_inputs: bool):
             scheme=scheme,
             check_inputs=check_inputs,
         )
-        return res.filtered_mean, res.filtered_cov
+        if smoothed:
+            sm = smoother.smooth(model, res, increments, jnp.asarray(Q), scheme=scheme)
+            return sm.smoothed_mean, sm.smoothed_cov
+        return res[0], res[1]
 
+    return run
+
+
+def tria_lapack(a):
+    """``tria`` by LAPACK's QR (the library route the unrolled code replaces)."""
+    r = jnp.linalg.qr(a.T, mode="r")
+    return (r * jnp.where(jnp.diagonal(r) < 0, -1.0, 1.0)[:, None]).T
+
+
+def with_lapack_tria(run, *args):
+    """``run`` (jitted) compiled with :func:`tria_lapack` in place of ``sqrt_ukf.tria``: traced
+    once here under the patch, later calls reuse that compilation."""
+    from unittest import mock
+
+    with mock.patch.object(sqrt_ukf, "tria", tria_lapack):
+        jax.block_until_ready(run(*args))
     return run
 
 
@@ -135,6 +158,11 @@ def main(argv=None) -> dict:
     jb_single = jax.jit(make_jbevo(check_inputs=False))
     jb_checked = jax.jit(make_jbevo(check_inputs=True))
     jb_batch = jax.jit(jax.vmap(make_jbevo(check_inputs=False)))
+    sqrt_single = jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf))
+    sqrt_batch = jax.jit(jax.vmap(make_jbevo(check_inputs=False, form=sqrt_ukf)))
+    smooth_single = jax.jit(make_jbevo(check_inputs=False, smoothed=True))
+    smooth_batch = jax.jit(jax.vmap(make_jbevo(check_inputs=False, smoothed=True)))
+    sqrt_lapack = with_lapack_tria(jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf)), x0[0], one.increments, one.fixes)
 
     # dynamax updates first, then predicts step t + 1 with inputs[t + 1]: start it from jbevo's
     # first prediction, so that its filtered means are jbevo's.
@@ -148,6 +176,9 @@ def main(argv=None) -> dict:
     dyn = make_dynamax_runner()
     dyn_single = jax.jit(lambda m, P, u, z: dyn(m, P, u, z))
     dyn_batch = jax.jit(jax.vmap(lambda m, P, u, z: dyn(m, P, u, z)))
+    uks = make_dynamax_runner(smoothed=True)
+    uks_single = jax.jit(lambda m, P, u, z: uks(m, P, u, z))
+    uks_batch = jax.jit(jax.vmap(lambda m, P, u, z: uks(m, P, u, z)))
 
     results: dict = {"T": steps, "batch": batch, "dtype": "float64", "alpha": ALPHA, "beta": BETA, "kappa": KAPPA}
     # dynamax given jbevo's sincos: how much of the lead is the vectorisable trig.
@@ -157,11 +188,18 @@ def main(argv=None) -> dict:
             "jbevo_single": lambda: jb_single(x0[0], one.increments, one.fixes),
             "jbevo_single_checked": lambda: jb_checked(x0[0], one.increments, one.fixes),
             "dynamax_single": lambda: dyn_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]),
+            "jbevo_sqrt_single": lambda: sqrt_single(x0[0], one.increments, one.fixes),
+            "jbevo_smoother_single": lambda: smooth_single(x0[0], one.increments, one.fixes),
+            "dynamax_uks_single": lambda: uks_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]),
+            "jbevo_sqrt_single_lapack_qr": lambda: sqrt_lapack(x0[0], one.increments, one.fixes),
         },
         "batched": {
             "jbevo_vmap64": lambda: jb_batch(x0, seqs.increments, seqs.fixes),
             "dynamax_vmap64": lambda: dyn_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
             "dynamax_vmap64_sincos": lambda: dyn_sc(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
+            "jbevo_sqrt_vmap64": lambda: sqrt_batch(x0, seqs.increments, seqs.fixes),
+            "jbevo_smoother_vmap64": lambda: smooth_batch(x0, seqs.increments, seqs.fixes),
+            "dynamax_uks_vmap64": lambda: uks_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
         },
     }
     # Independent runs of the whole measurement: this shared VM's speed varies between them.
@@ -172,6 +210,10 @@ def main(argv=None) -> dict:
         run["speedup_single_vs_dynamax"] = run["jbevo_single"] / run["dynamax_single"]
         run["speedup_vmap64_vs_dynamax"] = run["jbevo_vmap64"] / run["dynamax_vmap64"]
         run["speedup_vmap64_vs_dynamax_sincos"] = run["jbevo_vmap64"] / run["dynamax_vmap64_sincos"]
+        for kind in ("single", "vmap64"):
+            run[f"sqrt_slowdown_{kind}"] = run[f"jbevo_{kind}"] / run[f"jbevo_sqrt_{kind}"]
+            run[f"smoother_speedup_{kind}_vs_dynamax"] = run[f"jbevo_smoother_{kind}"] / run[f"dynamax_uks_{kind}"]
+        run["tria_speedup_vs_lapack_qr"] = run["jbevo_sqrt_single"] / run["jbevo_sqrt_single_lapack_qr"]
         runs.append(run)
     results["runs"] = runs
     results.update({name: float(np.median([r[name] for r in runs])) for name in runs[0]})
@@ -189,6 +231,16 @@ def main(argv=None) -> dict:
     diff = np.asarray(jb_means) - np.asarray(dyn_means)
     diff[:, 2] = np.asarray(wrap_angle(diff[:, 2]))
     results["max_abs_diff_vs_dynamax"] = float(np.abs(diff).max())
+    sqrt_means, sqrt_chol = sqrt_single(x0[0], one.increments, one.fixes)
+    _, jb_covs = jb_single(x0[0], one.increments, one.fixes)
+    results["max_abs_diff_sqrt_vs_covariance_form"] = float(
+        max(np.abs(np.asarray(sqrt_means - jb_means)).max(), np.abs(np.asarray(sqrt_chol @ sqrt_chol.mT - jb_covs)).max())
+    )
+    sm_means, _ = smooth_single(x0[0], one.increments, one.fixes)
+    uks_means, _ = uks_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0])
+    diff = np.asarray(sm_means) - np.asarray(uks_means)
+    diff[:, 2] = np.asarray(wrap_angle(diff[:, 2]))
+    results["max_abs_diff_smoother_vs_dynamax_uks"] = float(np.abs(diff).max())
 
     results["speedup_single_vs_filterpy"] = results["jbevo_single"] / results["filterpy_single"]
     results["machine"] = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}"
@@ -197,9 +249,10 @@ def main(argv=None) -> dict:
     return results
 
 
-def make_dynamax_runner(trig=lambda a: (jnp.sin(a), jnp.cos(a))):
-    """dynamax's UKF on the localization model; ``trig`` gives the motion model's (sin, cos)."""
-    from dynamax.nonlinear_gaussian_ssm import ParamsNLGSSM, UKFHyperParams, unscented_kalman_filter
+def make_dynamax_runner(trig=lambda a: (jnp.sin(a), jnp.cos(a)), smoothed: bool = False):
+    """dynamax's UKF (or, ``smoothed``, its unscented Kalman smoother) on the localization
+    model; ``trig`` gives the motion model's (sin, cos)."""
+    from dynamax.nonlinear_gaussian_ssm import ParamsNLGSSM, UKFHyperParams, unscented_kalman_filter, unscented_kalman_smoother
 
     hyper = UKFHyperParams(alpha=ALPHA, beta=BETA, kappa=KAPPA)
 
@@ -216,6 +269,9 @@ def make_dynamax_runner(trig=lambda a: (jnp.sin(a), jnp.cos(a))):
             emission_function=lambda x, u: x,
             emission_covariance=jnp.asarray(R),
         )
+        if smoothed:
+            post = unscented_kalman_smoother(params, fixes, hyper, inputs=inputs)
+            return post.smoothed_means, post.smoothed_covariances
         post = unscented_kalman_filter(
             params, fixes, hyper, inputs=inputs, output_fields=["filtered_means", "filtered_covariances"]
         )
@@ -240,6 +296,18 @@ def print_table(r: dict) -> None:
     print(
         f"max |jbevo - filterpy| = {r['max_abs_diff_vs_filterpy']:.2e}, "
         f"max |jbevo - dynamax| = {r['max_abs_diff_vs_dynamax']:.2e}"
+    )
+    print(
+        f"square-root form: {r['jbevo_sqrt_single']:,.0f} / {r['jbevo_sqrt_vmap64']:,.0f} steps/s "
+        f"(covariance form {r['sqrt_slowdown_single']:.2f}x / {r['sqrt_slowdown_vmap64']:.2f}x faster; "
+        f"max |difference| {r['max_abs_diff_sqrt_vs_covariance_form']:.1e}); tria by MGS "
+        f"{r['tria_speedup_vs_lapack_qr']:.2f}x faster than LAPACK's QR in the filter"
+    )
+    print(
+        f"filter + RTS smoother: {r['jbevo_smoother_single']:,.0f} / {r['jbevo_smoother_vmap64']:,.0f} steps/s, "
+        f"dynamax UKS {r['dynamax_uks_single']:,.0f} / {r['dynamax_uks_vmap64']:,.0f} "
+        f"({r['smoother_speedup_single_vs_dynamax']:.2f}x / {r['smoother_speedup_vmap64_vs_dynamax']:.2f}x); "
+        f"max |jbevo - dynamax| smoothed {r['max_abs_diff_smoother_vs_dynamax_uks']:.2e}"
     )
 
 

@@ -1,6 +1,7 @@
-"""Filtering: the unscented transform, the unscented Kalman filter and RTS smoother as pure JAX
-functions (``jit``, ``vmap``, ``grad``; exact missing-data handling), learnable noise covariances,
-the planar pose model, and the small dense linear algebra they run on.
+"""Filtering: the unscented transform, the unscented Kalman filter (covariance and square-root
+forms) and RTS smoother as pure JAX functions (``jit``, ``vmap``, ``grad``; exact missing-data
+handling), learnable noise covariances, the planar pose model, and the small dense linear algebra
+they run on.
 
 Example::
 
@@ -12,7 +13,7 @@ Example::
     result = ukf.filter(planar_pose_model(), GaussianState(jnp.zeros(3), 0.1 * jnp.eye(3)), increments, fixes, q(), r())
 """
 
-from jbevo.filtering import linalg, noise, planar, smoother, ukf, unscented
+from jbevo.filtering import linalg, noise, planar, smoother, sqrt_ukf, ukf, unscented
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.smoother import SmootherResult, smooth
@@ -51,6 +52,7 @@ __all__ = [
     "sigma_points",
     "smooth",
     "smoother",
+    "sqrt_ukf",
     "ukf",
     "unscented",
     "unscented_transform",

@@ -88,9 +88,9 @@ def tria(a: Float[Array, "n k"]) -> Float[Array, "n n"]:
     Up to :data:`~jbevo.filtering.linalg.UNROLL_MAX` rows: modified Gram-Schmidt on the rows of
     ``a`` (``L`` is the R factor of ``a^T``'s QR decomposition, transposed; MGS computes that
     factor as accurately as Householder QR does, only its Q loses orthogonality, and Q is not
-    needed), as unrolled elementwise code that XLA fuses; measured 1.7x faster than unrolled
-    Householder reflections on the 3 x 12 factors of the localization filter. Above, LAPACK's QR
-    of ``a^T`` (``L = R^T``, signs fixed)."""
+    needed), as unrolled elementwise code that XLA fuses (``benchmarks/ukf.py`` times the filter
+    with it against the filter with LAPACK's QR in its place). Above, LAPACK's QR of ``a^T``
+    (``L = R^T``, signs fixed)."""
     n, k = a.shape
     if k < n:
         raise ValueError(f"tria needs at least as many columns as rows, got {a.shape}")
