@@ -6,7 +6,8 @@ Simulated planar drives (:mod:`jbevo.data.synthetic.planar`) give noisy odometry
 pose fixes, some missing. The (x, y, yaw) UKF of :mod:`jbevo.filtering.planar` starts from badly
 chosen motion and measurement noise (Q too small, R too large: it trusts the drifting odometry);
 ``jax.grad`` through the whole filter recursion, vmapped over the training drives, and optax's
-Adam learn the six log standard deviations from the true poses. The demo prints the validation
+Adam learn the six log standard deviations from the true poses
+(:func:`jbevo.filtering.learning.fit_noise`, supervised). The demo prints the validation
 errors before and after, and writes ``metrics.json`` to ``--out`` if given.
 """
 
@@ -16,7 +17,6 @@ import argparse
 import time
 from pathlib import Path
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optax
@@ -25,41 +25,33 @@ from jbevo.cli import common
 from jbevo.data.synthetic.planar import PlanarSequence, simulate_planar_sequence
 from jbevo.files import write_json_atomic
 from jbevo.filtering import ukf
+from jbevo.filtering.learning import Noise, fit_noise
 from jbevo.filtering.noise import DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.geometry.angles import wrap_angle
 
 ODOMETRY_STD = (0.02, 0.01, 0.005)  # m, m, rad per step
 FIX_STD = (0.5, 0.5, 0.05)  # m, m, rad
+YAW_WEIGHT = 10.0  # m per rad in the training loss
 
 
-class NoiseModel(eqx.Module):
-    """The learnable part: diagonal Q (odometry) and R (pose fixes)."""
-
-    motion: DiagonalCovariance
-    measurement: DiagonalCovariance
+PRIOR_COV = (0.1, 0.1, 0.01)
 
 
-def run_filter(noise: NoiseModel, seq: PlanarSequence) -> ukf.FilterResult:
+def run_filter(noise: Noise, seq: PlanarSequence) -> ukf.FilterResult:
     """The planar pose UKF with ``noise`` over one simulated drive."""
-    prior = ukf.GaussianState(seq.poses[0], jnp.diag(jnp.array([0.1, 0.1, 0.01])))
+    prior = ukf.GaussianState(seq.poses[0], jnp.diag(jnp.array(PRIOR_COV)))
     return ukf.filter(planar_pose_model(), prior, seq.increments, seq.fixes, noise.motion(), noise.measurement())
 
 
-def errors(noise: NoiseModel, seq: PlanarSequence) -> tuple[jax.Array, jax.Array]:
+def errors(noise: Noise, seq: PlanarSequence) -> tuple[jax.Array, jax.Array]:
     """Per-step position error (m) and absolute yaw error (rad) of the filtered poses."""
     est = run_filter(noise, seq).filtered_mean
     pos = jnp.linalg.norm(est[:, :2] - seq.poses[1:, :2], axis=-1)
     return pos, jnp.abs(wrap_angle(est[:, 2] - seq.poses[1:, 2]))
 
 
-def loss(noise: NoiseModel, seqs: PlanarSequence, yaw_weight: float = 10.0) -> jax.Array:
-    """Mean squared position error plus ``yaw_weight`` (m/rad) squared times the yaw error."""
-    pos, yaw = jax.vmap(errors, in_axes=(None, 0))(noise, seqs)
-    return jnp.mean(pos**2) + yaw_weight**2 * jnp.mean(yaw**2)
-
-
-def summary(noise: NoiseModel, seqs: PlanarSequence) -> dict:
+def summary(noise: Noise, seqs: PlanarSequence) -> dict:
     """Validation position RMSE and maximum (m) and mean yaw error (deg) over the drives."""
     pos, yaw = jax.jit(jax.vmap(errors, in_axes=(None, 0)))(noise, seqs)
     return {
@@ -92,35 +84,41 @@ def demo(args: argparse.Namespace) -> dict:
     """Run the demo; returns the metrics (and writes them to ``args.out/metrics.json``)."""
     k_train, k_val = jax.random.split(jax.random.PRNGKey(args.seed))
     train, val = simulate(k_train, args.train, args.steps), simulate(k_val, args.val, args.steps)
-    noise = NoiseModel(  # deliberately wrong: Q 10x too small, R 5x too large
+    noise = Noise(  # deliberately wrong: Q 10x too small, R 5x too large
         DiagonalCovariance.from_std(jnp.array(ODOMETRY_STD) / 10),
         DiagonalCovariance.from_std(jnp.array(FIX_STD) * 5),
     )
-    optimizer = optax.adam(args.lr)
-    opt_state = optimizer.init(eqx.filter(noise, eqx.is_inexact_array))
-
-    @eqx.filter_jit
-    def train_step(noise, opt_state):
-        value, grads = eqx.filter_value_and_grad(loss)(noise, train)
-        updates, opt_state = optimizer.update(grads, opt_state, noise)
-        return eqx.apply_updates(noise, updates), opt_state, value
-
     before = summary(noise, val)
     print(
         f"validation before: position RMSE {before['position_rmse_m']:.3f} m, "
         f"max {before['position_max_m']:.3f} m, mean yaw error {before['yaw_mean_deg']:.3f} deg"
     )
     start = time.perf_counter()
+    # The loss: mean squared position error plus (10 m/rad x yaw error)^2 over the training drives.
+    prior = ukf.GaussianState(train.poses[:, 0], jnp.broadcast_to(jnp.diag(jnp.array(PRIOR_COV)), (args.train, 3, 3)))
+    fit = fit_noise(
+        planar_pose_model(),
+        prior,
+        train.increments,
+        train.fixes,
+        noise,
+        objective="supervised",
+        targets=train.poses[:, 1:],
+        state_weights=jnp.array([1.0, 1.0, YAW_WEIGHT**2]),
+        optimizer=optax.adam(args.lr),
+        iterations=args.iterations,
+    )
+    noise = fit.noise
     for it in range(args.iterations):
-        noise, opt_state, value = train_step(noise, opt_state)
         if it % max(1, args.iterations // 5) == 0 or it == args.iterations - 1:
-            print(f"  iteration {it:4d}  training loss {float(value):.5f}")
+            print(f"  iteration {it:4d}  training loss {float(fit.losses[it]):.5f}")
     seconds = time.perf_counter() - start
     after = summary(noise, val)
     print(
         f"validation after:  position RMSE {after['position_rmse_m']:.3f} m, "
         f"max {after['position_max_m']:.3f} m, mean yaw error {after['yaw_mean_deg']:.3f} deg"
     )
+    assert isinstance(noise.motion, DiagonalCovariance) and isinstance(noise.measurement, DiagonalCovariance)
     learned = {
         "motion_std": [float(v) for v in jnp.exp(noise.motion.log_std)],
         "measurement_std": [float(v) for v in jnp.exp(noise.measurement.log_std)],
@@ -146,4 +144,4 @@ def main(argv: list[str] | None = None) -> int:
     return common.run(build_parser(), demo, argv)
 
 
-__all__ = ["NoiseModel", "build_parser", "demo", "errors", "loss", "main", "run_filter", "summary"]
+__all__ = ["build_parser", "demo", "errors", "main", "run_filter", "summary"]

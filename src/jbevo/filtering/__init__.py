@@ -1,6 +1,6 @@
 """Filtering: the unscented transform, the unscented Kalman filter (covariance and square-root
 forms) and RTS smoother as pure JAX functions (``jit``, ``vmap``, ``grad``; exact missing-data
-handling), learnable noise covariances, the planar pose model, and the small dense linear algebra
+handling), learnable noise covariances and their fitting, the planar pose model, and the small dense linear algebra
 they run on.
 
 Example::
@@ -13,7 +13,7 @@ Example::
     result = ukf.filter(planar_pose_model(), GaussianState(jnp.zeros(3), 0.1 * jnp.eye(3)), increments, fixes, q(), r())
 """
 
-from jbevo.filtering import linalg, noise, planar, smoother, sqrt_ukf, ukf, unscented
+from jbevo.filtering import learning, linalg, noise, planar, smoother, sqrt_ukf, ukf, unscented
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.smoother import SmootherResult, smooth
@@ -43,6 +43,7 @@ __all__ = [
     "UnscentedResult",
     "circular_mean_fn",
     "filter_blocks",
+    "learning",
     "linalg",
     "linear_update",
     "noise",
