@@ -97,6 +97,23 @@ def ukf_speed() -> str:
     return table([f"method ({len(runs)} runs)", "steps/s, median (range)", "jbevo is x faster"], rows)
 
 
+def ukf_forms() -> str:
+    d = record("benchmarks/results/ukf.json")
+    runs = d["runs"]
+    rows = []
+    for key, label, ref, ref_label in [
+        ("jbevo_sqrt_single", "square-root UKF, one sequence", "jbevo_single", "covariance UKF"),
+        ("jbevo_sqrt_single_lapack_qr", "square-root UKF with LAPACK's QR as tria, one sequence", "jbevo_sqrt_single", "square-root UKF"),
+        ("jbevo_sqrt_vmap64", f"square-root UKF, vmap over {d['batch']}", "jbevo_vmap64", "covariance UKF"),
+        ("jbevo_smoother_single", "UKF + RTS smoother, one sequence", "dynamax_uks_single", "dynamax UKS"),
+        ("jbevo_smoother_vmap64", f"UKF + RTS smoother, vmap over {d['batch']}", "dynamax_uks_vmap64", "dynamax UKS"),
+    ]:
+        values = [r[key] for r in runs]
+        ratio = np.median([r[key] / r[ref] for r in runs])
+        rows.append([label, f"{np.median(values):,.0f} ({min(values):,.0f} - {max(values):,.0f})", f"{ratio:.2f} x {ref_label}"])
+    return table([f"method ({len(runs)} runs)", "steps/s, median (range)", "speed relative to"], rows)
+
+
 def ukf_agreement() -> str:
     d = record("benchmarks/results/ukf.json")
     return f"{d['max_abs_diff_vs_filterpy']:.1e} and {d['max_abs_diff_vs_dynamax']:.1e}"
@@ -546,6 +563,7 @@ def reference_metrics() -> str:
 TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
+    "ukf_forms": ukf_forms,
     "attitude_synthetic": attitude_synthetic,
     "attitude_real": attitude_real,
     "attitude_real_headline": attitude_real_headline,

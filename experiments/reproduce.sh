@@ -19,5 +19,6 @@ python experiments/reference_metrics.py
 python experiments/bands.py
 python experiments/builtin_training.py
 python experiments/kitti_odometry.py
+python experiments/kitti_odometry.py --real-imu
 python experiments/localization.py
 python docs/build.py
