@@ -103,7 +103,12 @@ def ukf_forms() -> str:
     rows = []
     for key, label, ref, ref_label in [
         ("jbevo_sqrt_single", "square-root UKF, one sequence", "jbevo_single", "covariance UKF"),
-        ("jbevo_sqrt_single_lapack_qr", "square-root UKF with LAPACK's QR as tria, one sequence", "jbevo_sqrt_single", "square-root UKF"),
+        (
+            "jbevo_sqrt_single_lapack_qr",
+            "square-root UKF with LAPACK's QR as tria, one sequence",
+            "jbevo_sqrt_single",
+            "square-root UKF",
+        ),
         ("jbevo_sqrt_vmap64", f"square-root UKF, vmap over {d['batch']}", "jbevo_vmap64", "covariance UKF"),
         ("jbevo_smoother_single", "UKF + RTS smoother, one sequence", "dynamax_uks_single", "dynamax UKS"),
         ("jbevo_smoother_vmap64", f"UKF + RTS smoother, vmap over {d['batch']}", "dynamax_uks_vmap64", "dynamax UKS"),

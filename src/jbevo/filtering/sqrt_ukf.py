@@ -38,13 +38,9 @@ from jbevo.filtering.ukf import (
     GaussianState,
     Scheme,
     StateSpaceModel,
-    _check_controls,
-    _check_model,
-    _check_noise,
-    _check_state,
-    _checked,
     _noise_at,
-    _promoted,
+    _sequence_inputs,
+    constant_or_sequence,
 )
 from jbevo.filtering.unscented import MerweScaled, offset_points, residuals, sigma_offsets, weighted_mean
 
@@ -222,29 +218,13 @@ def filter(
     step if they have a time axis); ``initial`` as a factor or as a covariance."""
     if isinstance(initial, SqrtGaussianState):
         initial = initial.to_gaussian()
-    initial, measurements, motion_cov, measurement_cov = _promoted(initial, measurements, motion_cov, measurement_cov)
-    n = _check_state(initial)
-    if measurements.ndim != 2:
-        raise ValueError(f"measurements must have shape (T, m), got {measurements.shape}")
-    steps, m = measurements.shape
-    _check_controls(controls, steps, "controls", "T")
-    if measurement_inputs is not None:
-        _check_controls(measurement_inputs, steps, "measurement_inputs", "T")
-    _check_noise(motion_cov, n, steps, "motion_cov")
-    _check_noise(measurement_cov, m, steps, "measurement_cov")
-    if mask is not None:
-        mask = jnp.asarray(mask, dtype=bool)
-        if mask.shape != measurements.shape:
-            raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {mask.shape}")
-    control0 = jax.tree.map(lambda a: a[0], controls)
-    z_input0 = None if measurement_inputs is None else jax.tree.map(lambda a: a[0], measurement_inputs)
-    _check_model(model, initial, control0, m, z_input0)
-    if check_inputs:
-        initial, controls, motion_cov, measurement_cov = _checked(initial, controls, motion_cov, measurement_cov)
+    initial, controls, measurements, motion_cov, measurement_cov, mask = _sequence_inputs(
+        model, initial, controls, measurements, motion_cov, measurement_cov, mask, check_inputs, measurement_inputs
+    )
     start = SqrtGaussianState.from_gaussian(initial)
     q_chol, r_chol = linalg.cholesky(motion_cov), linalg.cholesky(measurement_cov)
-    q_const, q_seq = (q_chol, None) if q_chol.ndim == 2 else (None, q_chol)
-    r_const, r_seq = (r_chol, None) if r_chol.ndim == 2 else (None, r_chol)
+    q_const, q_seq = constant_or_sequence(q_chol)
+    r_const, r_seq = constant_or_sequence(r_chol)
 
     def body(state, inputs):
         control, z, z_mask, q_t, r_t, z_input = inputs

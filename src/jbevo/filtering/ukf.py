@@ -223,28 +223,12 @@ def filter(
     ``lax.scan``. ``measurement_inputs`` (a pytree with leading axis ``T``, or ``None``) is
     passed to the model as ``measurement(x, measurement_inputs[t])``.
     """
-    initial, measurements, motion_cov, measurement_cov = _promoted(initial, measurements, motion_cov, measurement_cov)
-    n = _check_state(initial)
-    if measurements.ndim != 2:
-        raise ValueError(f"measurements must have shape (T, m), got {measurements.shape}")
-    steps, m = measurements.shape
-    _check_controls(controls, steps, "controls", "T")
-    if measurement_inputs is not None:
-        _check_controls(measurement_inputs, steps, "measurement_inputs", "T")
-    _check_noise(motion_cov, n, steps, "motion_cov")
-    _check_noise(measurement_cov, m, steps, "measurement_cov")
-    if mask is not None:
-        mask = jnp.asarray(mask, dtype=bool)
-        if mask.shape != measurements.shape:
-            raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {mask.shape}")
-    control0 = jax.tree.map(lambda a: a[0], controls)
-    z_input0 = None if measurement_inputs is None else jax.tree.map(lambda a: a[0], measurement_inputs)
-    _check_model(model, initial, control0, m, z_input0)
-    if check_inputs:
-        initial, controls, motion_cov, measurement_cov = _checked(initial, controls, motion_cov, measurement_cov)
+    initial, controls, measurements, motion_cov, measurement_cov, mask = _sequence_inputs(
+        model, initial, controls, measurements, motion_cov, measurement_cov, mask, check_inputs, measurement_inputs
+    )
 
-    q_const, q_seq = (motion_cov, None) if motion_cov.ndim == 2 else (None, motion_cov)
-    r_const, r_seq = (measurement_cov, None) if measurement_cov.ndim == 2 else (None, measurement_cov)
+    q_const, q_seq = constant_or_sequence(motion_cov)
+    r_const, r_seq = constant_or_sequence(measurement_cov)
 
     def body(state, inputs):
         return _step(model, scheme, q_const, r_const, state, inputs)
@@ -309,6 +293,39 @@ def filter_blocks(
 
 
 # ----------------------------------------------------------------------------- input checks
+
+
+def _sequence_inputs(model, initial, controls, measurements, motion_cov, measurement_cov, mask, check_inputs, measurement_inputs):
+    """The checks and promotions :func:`filter` (and the square-root filter) apply to a
+    sequence's inputs: ``(initial, controls, measurements, motion_cov, measurement_cov, mask)``,
+    of one dtype, shapes checked (``ValueError`` naming the argument), values checked at run
+    time with ``check_inputs``."""
+    initial, measurements, motion_cov, measurement_cov = _promoted(initial, measurements, motion_cov, measurement_cov)
+    n = _check_state(initial)
+    if measurements.ndim != 2:
+        raise ValueError(f"measurements must have shape (T, m), got {measurements.shape}")
+    steps, m = measurements.shape
+    _check_controls(controls, steps, "controls", "T")
+    if measurement_inputs is not None:
+        _check_controls(measurement_inputs, steps, "measurement_inputs", "T")
+    _check_noise(motion_cov, n, steps, "motion_cov")
+    _check_noise(measurement_cov, m, steps, "measurement_cov")
+    if mask is not None:
+        mask = jnp.asarray(mask, dtype=bool)
+        if mask.shape != measurements.shape:
+            raise ValueError(f"mask must have the shape of measurements {measurements.shape}, got {mask.shape}")
+    control0 = jax.tree.map(lambda a: a[0], controls)
+    z_input0 = None if measurement_inputs is None else jax.tree.map(lambda a: a[0], measurement_inputs)
+    _check_model(model, initial, control0, m, z_input0)
+    if check_inputs:
+        initial, controls, motion_cov, measurement_cov = _checked(initial, controls, motion_cov, measurement_cov)
+    return initial, controls, measurements, motion_cov, measurement_cov, mask
+
+
+def constant_or_sequence(noise: Array) -> tuple[Array | None, Array | None]:
+    """``(noise, None)`` for a constant ``(d, d)`` noise, ``(None, noise)`` for one with a
+    leading time axis (the scanned slice): the two forms :func:`filter` takes."""
+    return (noise, None) if noise.ndim == 2 else (None, noise)
 
 
 def _promoted(initial, measurements, motion_cov, measurement_cov):
