@@ -1,7 +1,8 @@
 """Filtering: the unscented transform, the unscented Kalman filter (covariance and square-root
 forms) and RTS smoother as pure JAX functions (``jit``, ``vmap``, ``grad``; exact missing-data
-handling), learnable noise covariances and their fitting, the planar pose model, and the small dense linear algebra
-they run on.
+handling), the iterated posterior-linearisation smoother with its affine Kalman filter and
+smoother parallel in time, learnable noise covariances and their fitting, the planar pose model,
+and the small dense linear algebra they run on.
 
 Example::
 
@@ -13,7 +14,18 @@ Example::
     result = ukf.filter(planar_pose_model(), GaussianState(jnp.zeros(3), 0.1 * jnp.eye(3)), increments, fixes, q(), r())
 """
 
-from jbevo.filtering import learning, linalg, noise, planar, smoother, sqrt_ukf, ukf, unscented
+from jbevo.filtering import (
+    learning,
+    linalg,
+    noise,
+    parallel,
+    planar,
+    posterior_linearisation,
+    smoother,
+    sqrt_ukf,
+    ukf,
+    unscented,
+)
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.smoother import SmootherResult, smooth
@@ -47,8 +59,10 @@ __all__ = [
     "linalg",
     "linear_update",
     "noise",
+    "parallel",
     "planar",
     "planar_pose_model",
+    "posterior_linearisation",
     "predict",
     "sigma_points",
     "smooth",
