@@ -30,6 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 TABLE = re.compile(r"(<!-- table: (?P<name>[\w.-]+) -->\n)(?P<body>.*?)(<!-- /table -->)", re.S)
 VALUE = re.compile(r"(<!-- value: (?P<name>[\w.-]+) -->)(?P<body>.*?)(<!-- /value -->)")
+OPENING = re.compile(r"<!-- value: (?P<name>[\w.-]+) -->")
 
 
 def render(text: str, page: Path) -> str:
@@ -47,6 +48,11 @@ def render(text: str, page: Path) -> str:
             raise SystemExit(f"{page.name}: unknown value {name!r}")
         return match[1] + VALUES[name]() + match[4]
 
+    opened = [m["name"] for m in OPENING.finditer(text)]
+    closed = [m["name"] for m in VALUE.finditer(text)]
+    if opened != closed:
+        unclosed = sorted(set(opened) - set(closed)) or opened
+        raise SystemExit(f"{page.name}: value marker {unclosed[0]!r} is not closed on its own line by <!-- /value -->")
     return VALUE.sub(value, TABLE.sub(table, text))
 
 
