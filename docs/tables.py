@@ -119,6 +119,38 @@ def ukf_forms() -> str:
     return table([f"method ({len(runs)} runs)", "steps/s, median (range)", "speed relative to"], rows)
 
 
+def parallel_in_time() -> str:
+    d = record("benchmarks/results/parallel_in_time.json")
+    rows = []
+    for steps, r in d["by_steps"].items():
+        s = r["seconds"]
+        rows.append(
+            [
+                f"{int(steps):,}",
+                f"{s['ukf_uks'] * 1e3:,.1f}",
+                f"{s['ipls_sequential'] * 1e3:,.1f}",
+                f"{s['ipls_parallel'] * 1e3:,.1f}",
+                f"{r['parallel_over_sequential']['ipls_iteration']:.2f}",
+                f"{r['parallel_over_sequential']['affine_filter_smoother']:.2f}",
+                f"{r['max_abs_diff_parallel_vs_sequential']['smoothed_mean']:.0e}",
+                str(r["iterations_to_converge"]),
+            ]
+        )
+    return table(
+        [
+            "steps T",
+            "UKF + URTS (ms)",
+            "IPLS iteration, sequential (ms)",
+            "IPLS iteration, parallel (ms)",
+            "parallel / sequential",
+            "affine filter + smoother alone, parallel / sequential",
+            "max |parallel - sequential|",
+            "iterations to 1e-9",
+        ],
+        rows,
+    )
+
+
 def ukf_agreement() -> str:
     d = record("benchmarks/results/ukf.json")
     return f"{d['max_abs_diff_vs_filterpy']:.1e} and {d['max_abs_diff_vs_dynamax']:.1e}"
@@ -569,6 +601,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
     "ukf_forms": ukf_forms,
+    "parallel_in_time": parallel_in_time,
     "attitude_synthetic": attitude_synthetic,
     "attitude_real": attitude_real,
     "attitude_real_headline": attitude_real_headline,
