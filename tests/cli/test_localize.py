@@ -20,14 +20,17 @@ def test_train_resume_and_evaluate(tmp_path, capsys):
     assert checkpoint.load(out / "last.ckpt")[2]["epoch"] == 2
 
     ev = tmp_path / "eval"
-    assert main(["evaluate", *small, "--checkpoint", str(out), "--conditions", "day", "night", "--out", str(ev)]) == 0
+    args = ["evaluate", *small, "--checkpoint", str(out), "--conditions", "day", "night", "--out", str(ev), "--smooth"]
+    assert main(args) == 0
     result = json.loads((ev / "metrics.json").read_text())
     assert len(result["scenes"]) == 2 and result["frames_per_s"] > 0
     for entry in result["scenes"].values():
-        assert set(entry) >= {"BEVO+", "BEVO odometry", "map matching alone"}
+        assert set(entry) >= {"BEVO+", "BEVO+ smoothed", "BEVO odometry", "map matching alone"}
         assert entry["BEVO+"]["mean_position_error_m"] < 1.0
+        assert entry["BEVO+ smoothed"]["mean_position_error_m"] < 1.0
     name = next(iter(result["scenes"]))
     assert (ev / "plots" / f"{name}.png").is_file() and (ev / "poses" / f"{name}_bevo_plus.txt").is_file()
+    assert (ev / "poses" / f"{name}_bevo_plus_smoothed.txt").is_file()
 
 
 def test_errors_name_what_is_wrong_and_exit_with_1(tmp_path, capsys):

@@ -17,6 +17,7 @@ from jbevo.filtering.planar import planar_pose_model
 from jbevo.geometry.angles import wrap_angle
 from jbevo.geometry.se2 import se2_between, se2_compose
 from jbevo.models.bevo_plus import BevoPlus
+from jbevo.models.localization_smoother import smooth_localization
 from jbevo.models.losses import localization_loss
 from jbevo.models.presets import localization_model
 from jbevo.vision.bands import BandGeometry
@@ -148,6 +149,12 @@ def test_bevo_plus_stays_on_the_map_where_odometry_drifts(carla):
     assert np.asarray(out.accepted).mean() > 0.9
     odometry = eqx.filter_jit(lambda mod, s: mod(s, warm_start=True))(model.odometry, seq)
     assert pose_errors(odometry.poses, seq.planar)["final_position_error_m"] > 2 * err["final_position_error_m"]
+    # Offline, every map fix informs every pose: the smoothed trajectory is closer still.
+    smoothed = jax.jit(smooth_localization)(out)
+    assert pose_errors(smoothed.smoothed_mean, seq.planar)["mean_position_error_m"] < 0.97 * err["mean_position_error_m"]
+    np.testing.assert_array_equal(smoothed.smoothed_mean[-1], out.poses[-1])
+    with pytest.raises(ValueError, match="one sequence's output"):
+        smooth_localization(jax.tree.map(lambda a: a[None], out))
     # vmap over sequences sharing the map equals one at a time
     both = eqx.filter_jit(jax.vmap(lambda mod, s, mp: mod(s, mp, warm_start=True), in_axes=(None, 0, None)))(
         model, data.stack([seq, seq]), m

@@ -21,7 +21,9 @@ without one), and also runs BEVO odometry alone (no map) and map matching alone 
 fix from a crop at the previous fix, no odometry, no filter). It writes ``poses/NAME_{gt,bevo_plus,odometry,map_only}.txt``
 (KITTI format, z = 0), ``plots/NAME.png`` and ``metrics.json``: per condition and method the mean
 and max position error (m), the mean yaw error (deg), the final position error, the distance
-driven and, for BEVO+, the fraction of accepted map fixes.
+driven and, for BEVO+, the fraction of accepted map fixes. With ``--smooth`` it also smooths
+BEVO+'s trajectory offline (:mod:`jbevo.models.localization_smoother`, the unscented RTS smoother
+over the pose filter) and reports it as "BEVO+ smoothed" beside the filtered one.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ from jbevo.eval.scores import pose_errors
 from jbevo.files import write_json_atomic
 from jbevo.models.baselines import map_matching_alone
 from jbevo.models.bevo_plus import BevoPlus
+from jbevo.models.localization_smoother import smooth_localization
 from jbevo.models.losses import localization_loss
 from jbevo.models.presets import localization_model
 from jbevo.models.runners import run_bevo_batch, run_bevo_plus_batch
@@ -55,7 +58,12 @@ from jbevo.training import checkpoint
 from jbevo.training.loop import make_step, save_epoch, start_run, train_epochs
 from jbevo.training.validation import validate_localization
 
-FILE_TAGS = {"BEVO+": "bevo_plus", "BEVO odometry": "odometry", "map matching alone": "map_only"}
+FILE_TAGS = {
+    "BEVO+": "bevo_plus",
+    "BEVO+ smoothed": "bevo_plus_smoothed",
+    "BEVO odometry": "odometry",
+    "map matching alone": "map_only",
+}
 
 
 def _print(label: str, m: dict) -> None:
@@ -160,6 +168,7 @@ def evaluate(args: argparse.Namespace) -> dict:
     fps = batch.frame_times.size / (time.perf_counter() - t0)
     odometry = run_bevo_batch(model.odometry, batch, True).poses
     map_only = eqx.filter_jit(jax.vmap(map_matching_alone, in_axes=(None, 0, None)))(model, batch, map_)
+    smoothed = jax.jit(jax.vmap(smooth_localization))(out).smoothed_mean if args.smooth else None
 
     results = {}
     for i, sc in enumerate(progress(scenes, "writing poses and plots")):
@@ -169,6 +178,8 @@ def evaluate(args: argparse.Namespace) -> dict:
             "BEVO odometry": np.asarray(odometry[i]),
             "map matching alone": np.asarray(map_only[i]),
         }
+        if smoothed is not None:
+            estimates["BEVO+ smoothed"] = np.asarray(smoothed[i])
         entry = {name: pose_errors(est, truth) for name, est in estimates.items()}
         entry["BEVO+"]["accepted"] = float(np.mean(np.asarray(out.accepted[i])))
         entry["final_error_ratio_odometry_to_bevo_plus"] = entry["BEVO odometry"]["final_position_error_m"] / max(
@@ -224,6 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--conditions", nargs="+", choices=sorted(CONDITIONS), default=["day", "night", "dynamic"])
     e.add_argument("--part", choices=PARTS, default="test")
     e.add_argument("--out", type=Path, default=Path("runs/localize_eval"))
+    e.add_argument("--smooth", action="store_true", help="also smooth BEVO+'s trajectory offline (unscented RTS smoother)")
     e.set_defaults(func=evaluate)
     return p
 

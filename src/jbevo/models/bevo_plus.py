@@ -85,6 +85,7 @@ class LocalizationOutput(NamedTuple):
     position_std: Float[Array, " T"]  #: sqrt of the filtered position covariance's trace
     odometry: Float[Array, "T 3"]  #: BEVO's dead-reckoned poses (no map)
     increments: Float[Array, "T 3"]  #: BEVO's increments (dx, dy, dyaw)
+    motion_covariances: Float[Array, "T 3 3"]  #: the Q of each frame's prediction (none at frame 0)
 
 
 class BevoPlus(eqx.Module):
@@ -226,6 +227,7 @@ class BevoPlus(eqx.Module):
                 std,
                 odometry.pose,
                 self._increment(seen, frame),
+                self._motion_cov(carry.pose, seen),
             )
             return LocalizationCarry(odometry, pose, streak), out
 
@@ -244,9 +246,11 @@ class BevoPlus(eqx.Module):
     def predict_pose(self, state: ukf.GaussianState, seen: Observation, frame: Frame) -> ukf.GaussianState:
         """The pose filter's prediction with the odometry's increment and ``Q(c)`` (none at
         frame 0)."""
-        q = self.motion_covariance(seen.confidence).astype(state.mean.dtype)
-        moved = ukf.predict(planar_pose_model(), state, self._increment(seen, frame), q)
+        moved = ukf.predict(planar_pose_model(), state, self._increment(seen, frame), self._motion_cov(state, seen))
         return jax.tree_util.tree_map(lambda a, b: jnp.where(frame.number > 0, a, b), moved, state)
+
+    def _motion_cov(self, state: ukf.GaussianState, seen: Observation) -> Float[Array, "3 3"]:
+        return self.motion_covariance(seen.confidence).astype(state.mean.dtype)
 
     def update_pose(
         self, predicted: ukf.GaussianState, match: MapMatch, streak: Int[Array, ""]
