@@ -149,17 +149,27 @@ def train(f: AttitudeFilter, data: dict, compensated: bool, steps: int, lr: floa
     return fit(f, loss, data, steps, lr)
 
 
-def run_speed_aided(f: SpeedAidedAttitude, gyro, accel, initial, velocity):
+def speed_aided_beliefs(f: SpeedAidedAttitude, gyro, accel, initial, velocity) -> AttitudeState:
     """The speed-aided filter (BEVO's) over one window, measuring the odometry stand-in's forward
-    speed, from the true initial attitude and speed."""
+    speed, from the true initial attitude and speed: its belief after every frame."""
     start = AttitudeState.initial(initial, velocity[0, 0], 0.03, 0.005, 0.1)
 
     def step(state, x):
         g, a, v = x
         state = f.update_lateral_tilt(f.update_speed(f.predict(state, g, a), v), g, a).astype(initial.dtype)
-        return state, state.pitch_roll
+        return state, state
 
     return jax.lax.scan(step, start, (gyro, accel, velocity[:, 0]))[1]
+
+
+def run_speed_aided(f: SpeedAidedAttitude, gyro, accel, initial, velocity):
+    """:func:`speed_aided_beliefs`' pitch and roll per frame."""
+    return speed_aided_beliefs(f, gyro, accel, initial, velocity).pitch_roll
+
+
+def run_speed_aided_smoothed(f: SpeedAidedAttitude, gyro, accel, initial, velocity):
+    """Offline: the unscented RTS smoother over :func:`speed_aided_beliefs` (pitch and roll)."""
+    return f.smooth(speed_aided_beliefs(f, gyro, accel, initial, velocity), gyro, accel).pitch_roll
 
 
 def train_speed_aided(f: SpeedAidedAttitude, data: dict, steps: int, lr: float) -> tuple[SpeedAidedAttitude, list]:

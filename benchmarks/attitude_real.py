@@ -14,7 +14,8 @@ drive's ground truth is levelled by the gravity its own accelerometer finds
 frame 0). Rows: tilt only, gyro only, the DUKF (hand-set; Q and R learned), with a gyro-bias
 state, motion-compensated (true planar body velocity + N(0, 5 cm/s) standing in for the
 odometry's, as in ``attitude.py``), the speed-aided filter (BEVO's; the same stand-in's forward
-speed). Learned filters: Adam through the filter on 00-07 (windows of ``--window`` frames from
+speed) and, offline, its beliefs through the unscented RTS smoother
+(``SpeedAidedAttitude.smooth``, the filter's own noise). Learned filters: Adam through the filter on 00-07 (windows of ``--window`` frames from
 the true attitude), the step chosen on 08 (whole drive), tested on 09 and 10; training is
 full-batch and deterministic (no seed enters). Peers: ``ahrs`` Madgwick, Mahony, EKF and
 complementary, each one's gain chosen on 00-08 from a grid, their conventions checked first on a
@@ -167,6 +168,9 @@ def jbevo_methods(
     """Every jbevo row on ``test`` (learned ones trained on ``train``, selected on ``val``)."""
     run_dukf = eqx.filter_jit(lambda f, s, c: f(s["gyro"], s["accel"], s["initial"], s["velocity"] if c else None))
     run_sa = eqx.filter_jit(lambda f, s: sim.run_speed_aided(f, s["gyro"], s["accel"], s["initial"], s["velocity"]))
+    run_sa_smoothed = eqx.filter_jit(
+        lambda f, s: sim.run_speed_aided_smoothed(f, s["gyro"], s["accel"], s["initial"], s["velocity"])
+    )
     test_j, val_j = [as_jnp(s) for s in test], [as_jnp(s) for s in val]
     data = sim.windows(train, window)
     out, selection = {}, {}
@@ -196,6 +200,9 @@ def jbevo_methods(
             sa0, speed_aided_loss, data, lambda f: scores([run_sa(f, s) for s in val_j], val)[0], args.steps, args.lr
         )
         out["speed_aided_learned"] = scores([run_sa(sa, s) for s in test_j], test)
+        # Offline: the RTS smoother over the same filters' beliefs (noise as trained for filtering).
+        out["speed_aided_smoothed_handset"] = scores([run_sa_smoothed(sa0, s) for s in test_j], test)
+        out["speed_aided_smoothed_learned"] = scores([run_sa_smoothed(sa, s) for s in test_j], test)
     return {"scores": out, "selection": selection}
 
 

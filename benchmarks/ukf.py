@@ -1,9 +1,12 @@
-"""UKF speed and agreement: jbevo vs dynamax 1.0.3 vs filterpy 2.0.0, same data, same process.
+"""UKF speed and agreement: jbevo vs dynamax 1.0.3 vs cuthbertlib 0.1.1 vs filterpy 2.0.0, same data, same process.
 
 The BEVO+ localization model: state (x, y, yaw), control the body-frame odometry increment,
 measurement the pose itself with yaw wrapped; T = 5,000 steps; alpha = 1, beta = 2, kappa = 0;
 float64. jbevo's covariance and square-root filters, and its filter plus unscented RTS smoother
-against dynamax's unscented Kalman smoother; and the square-root filter with its ``tria``
+against dynamax's unscented Kalman smoother; cuthbert has no unscented filter of its own, so its
+peer is one composed of cuthbertlib's parts (unscented statistical linear regression,
+``quadrature.linearize.functional``, feeding its square-root Kalman predict / update and RTS
+steps in a ``lax.scan``); and the square-root filter with its ``tria``
 (unrolled modified Gram-Schmidt) against the same filter with LAPACK's QR in its place. The methods are timed in interleaved rounds (best of ``--repeats``), the whole
 measurement repeated ``--runs`` times (the JSON keeps every run; its top-level figures are the
 medians over the runs). Writes ``benchmarks/results/ukf.json`` and prints a table.
@@ -82,6 +85,56 @@ def with_lapack_tria(run, *args):
 
     with mock.patch.object(sqrt_ukf, "tria", tria_lapack):
         jax.block_until_ready(run(*args))
+    return run
+
+
+# --------------------------------------------------------------------------- cuthbertlib
+
+
+def make_cuthbertlib_runner(smoothed: bool = False):
+    """The square-root unscented filter (and RTS smoother) built from cuthbertlib's parts: each
+    step statistically linearises the motion (and then the measurement) with its unscented
+    quadrature and runs its square-root Kalman step on the result. Like dynamax it averages
+    angles linearly, so it runs on unwrapped yaw: ``run(x0, increments, fixes) -> (means, factors)``."""
+    from cuthbertlib.kalman import filter_update, predict, smoother_update
+    from cuthbertlib.quadrature import unscented
+    from cuthbertlib.quadrature.linearize import functional
+
+    quadrature = unscented.weights(3, alpha=ALPHA, beta=BETA, kappa=KAPPA)
+    chol_q, chol_r = jnp.linalg.cholesky(jnp.asarray(Q)), jnp.linalg.cholesky(jnp.asarray(R))
+
+    def motion(u):
+        def f(x):
+            s, c = jnp.sin(x[2]), jnp.cos(x[2])
+            return jnp.stack([x[0] + c * u[0] - s * u[1], x[1] + s * u[0] + c * u[1], x[2] + u[2]])
+
+        return f
+
+    def filter_step(carry, inputs):
+        m, chol = carry
+        u, z = inputs
+        F, c, chol_q_lin = functional(motion(u), chol_q, m, chol, quadrature, mode="cholesky")
+        m, chol = predict(m, chol, F, c, chol_q_lin)
+        H, d, chol_r_lin = functional(lambda x: x, chol_r, m, chol, quadrature, mode="cholesky")
+        (m, chol), _ = filter_update(m, chol, H, d, chol_r_lin, z)
+        return (m, chol), (m, chol)
+
+    def smoother_step(carry, inputs):
+        sm, s_chol = carry
+        m, chol, u_next = inputs
+        F, c, chol_q_lin = functional(motion(u_next), chol_q, m, chol, quadrature, mode="cholesky")
+        (sm, s_chol), _ = smoother_update(m, chol, sm, s_chol, F, c, chol_q_lin)
+        return (sm, s_chol), (sm, s_chol)
+
+    def run(x0, increments, fixes):
+        init = (x0, jnp.linalg.cholesky(jnp.asarray(P0)))
+        _, (means, factors) = jax.lax.scan(filter_step, init, (increments, fixes))
+        if not smoothed:
+            return means, factors
+        last = (means[-1], factors[-1])
+        _, (sm, s_chol) = jax.lax.scan(smoother_step, last, (means[:-1], factors[:-1], increments[1:]), reverse=True)
+        return jnp.concatenate([sm, means[-1:]]), jnp.concatenate([s_chol, factors[-1:]])
+
     return run
 
 
@@ -180,6 +233,11 @@ def main(argv=None) -> dict:
     uks_single = jax.jit(lambda m, P, u, z: uks(m, P, u, z))
     uks_batch = jax.jit(jax.vmap(lambda m, P, u, z: uks(m, P, u, z)))
 
+    cb = make_cuthbertlib_runner()
+    cb_single, cb_batch = jax.jit(cb), jax.jit(jax.vmap(cb))
+    cb_uks = make_cuthbertlib_runner(smoothed=True)
+    cb_uks_single, cb_uks_batch = jax.jit(cb_uks), jax.jit(jax.vmap(cb_uks))
+
     results: dict = {"T": steps, "batch": batch, "dtype": "float64", "alpha": ALPHA, "beta": BETA, "kappa": KAPPA}
     # dynamax given jbevo's sincos: how much of the lead is the vectorisable trig.
     dyn_sc = jax.jit(jax.vmap(make_dynamax_runner(trig=sincos)))
@@ -192,6 +250,8 @@ def main(argv=None) -> dict:
             "jbevo_smoother_single": lambda: smooth_single(x0[0], one.increments, one.fixes),
             "dynamax_uks_single": lambda: uks_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0]),
             "jbevo_sqrt_single_lapack_qr": lambda: sqrt_lapack(x0[0], one.increments, one.fixes),
+            "cuthbertlib_single": lambda: cb_single(x0[0], one.increments, fixes_unwrapped[0]),
+            "cuthbertlib_uks_single": lambda: cb_uks_single(x0[0], one.increments, fixes_unwrapped[0]),
         },
         "batched": {
             "jbevo_vmap64": lambda: jb_batch(x0, seqs.increments, seqs.fixes),
@@ -200,6 +260,8 @@ def main(argv=None) -> dict:
             "jbevo_sqrt_vmap64": lambda: sqrt_batch(x0, seqs.increments, seqs.fixes),
             "jbevo_smoother_vmap64": lambda: smooth_batch(x0, seqs.increments, seqs.fixes),
             "dynamax_uks_vmap64": lambda: uks_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
+            "cuthbertlib_vmap64": lambda: cb_batch(x0, seqs.increments, fixes_unwrapped),
+            "cuthbertlib_uks_vmap64": lambda: cb_uks_batch(x0, seqs.increments, fixes_unwrapped),
         },
     }
     # Independent runs of the whole measurement: this shared VM's speed varies between them.
@@ -213,6 +275,8 @@ def main(argv=None) -> dict:
         for kind in ("single", "vmap64"):
             run[f"sqrt_slowdown_{kind}"] = run[f"jbevo_{kind}"] / run[f"jbevo_sqrt_{kind}"]
             run[f"smoother_speedup_{kind}_vs_dynamax"] = run[f"jbevo_smoother_{kind}"] / run[f"dynamax_uks_{kind}"]
+            run[f"sqrt_speedup_{kind}_vs_cuthbertlib"] = run[f"jbevo_sqrt_{kind}"] / run[f"cuthbertlib_{kind}"]
+            run[f"smoother_speedup_{kind}_vs_cuthbertlib"] = run[f"jbevo_smoother_{kind}"] / run[f"cuthbertlib_uks_{kind}"]
         run["tria_speedup_vs_lapack_qr"] = run["jbevo_sqrt_single"] / run["jbevo_sqrt_single_lapack_qr"]
         runs.append(run)
     results["runs"] = runs
@@ -236,11 +300,18 @@ def main(argv=None) -> dict:
     results["max_abs_diff_sqrt_vs_covariance_form"] = float(
         max(np.abs(np.asarray(sqrt_means - jb_means)).max(), np.abs(np.asarray(sqrt_chol @ sqrt_chol.mT - jb_covs)).max())
     )
-    sm_means, _ = smooth_single(x0[0], one.increments, one.fixes)
+    sm_means, sm_covs = smooth_single(x0[0], one.increments, one.fixes)
     uks_means, _ = uks_single(pred0.mean[0], pred0.cov[0], dyn_inputs[0], fixes_unwrapped[0])
     diff = np.asarray(sm_means) - np.asarray(uks_means)
     diff[:, 2] = np.asarray(wrap_angle(diff[:, 2]))
     results["max_abs_diff_smoother_vs_dynamax_uks"] = float(np.abs(diff).max())
+    for name, run_peer, ours in (("", cb_single, (jb_means, jb_covs)), ("smoother_", cb_uks_single, (sm_means, sm_covs))):
+        peer_means, peer_chol = run_peer(x0[0], one.increments, fixes_unwrapped[0])
+        diff = np.asarray(ours[0]) - np.asarray(peer_means)
+        diff[:, 2] = np.asarray(wrap_angle(diff[:, 2]))
+        results[f"max_abs_diff_{name}vs_cuthbertlib"] = float(
+            max(np.abs(diff).max(), np.abs(np.asarray(peer_chol @ peer_chol.mT - ours[1])).max())
+        )
 
     results["speedup_single_vs_filterpy"] = results["jbevo_single"] / results["filterpy_single"]
     results["machine"] = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}"
@@ -308,6 +379,13 @@ def print_table(r: dict) -> None:
         f"dynamax UKS {r['dynamax_uks_single']:,.0f} / {r['dynamax_uks_vmap64']:,.0f} "
         f"({r['smoother_speedup_single_vs_dynamax']:.2f}x / {r['smoother_speedup_vmap64_vs_dynamax']:.2f}x); "
         f"max |jbevo - dynamax| smoothed {r['max_abs_diff_smoother_vs_dynamax_uks']:.2e}"
+    )
+    print(
+        f"cuthbertlib square-root UKF {r['cuthbertlib_single']:,.0f} / {r['cuthbertlib_vmap64']:,.0f} steps/s "
+        f"(jbevo's square-root form {r['sqrt_speedup_single_vs_cuthbertlib']:.2f}x / {r['sqrt_speedup_vmap64_vs_cuthbertlib']:.2f}x), "
+        f"with RTS {r['cuthbertlib_uks_single']:,.0f} / {r['cuthbertlib_uks_vmap64']:,.0f} (jbevo's smoother "
+        f"{r['smoother_speedup_single_vs_cuthbertlib']:.2f}x / {r['smoother_speedup_vmap64_vs_cuthbertlib']:.2f}x); "
+        f"max |difference| filter {r['max_abs_diff_vs_cuthbertlib']:.1e}, smoother {r['max_abs_diff_smoother_vs_cuthbertlib']:.1e}"
     )
 
 

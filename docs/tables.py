@@ -112,6 +112,10 @@ def ukf_forms() -> str:
         ("jbevo_sqrt_vmap64", f"square-root UKF, vmap over {d['batch']}", "jbevo_vmap64", "covariance UKF"),
         ("jbevo_smoother_single", "UKF + RTS smoother, one sequence", "dynamax_uks_single", "dynamax UKS"),
         ("jbevo_smoother_vmap64", f"UKF + RTS smoother, vmap over {d['batch']}", "dynamax_uks_vmap64", "dynamax UKS"),
+        ("jbevo_sqrt_single", "square-root UKF, one sequence", "cuthbertlib_single", "cuthbertlib's"),
+        ("jbevo_sqrt_vmap64", f"square-root UKF, vmap over {d['batch']}", "cuthbertlib_vmap64", "cuthbertlib's"),
+        ("jbevo_smoother_single", "UKF + RTS smoother, one sequence", "cuthbertlib_uks_single", "cuthbertlib's"),
+        ("jbevo_smoother_vmap64", f"UKF + RTS smoother, vmap over {d['batch']}", "cuthbertlib_uks_vmap64", "cuthbertlib's"),
     ]:
         values = [r[key] for r in runs]
         ratio = np.median([r[key] / r[ref] for r in runs])
@@ -179,6 +183,7 @@ ATTITUDE_REAL_ROWS = (
     ("DUKF + gyro bias", "dukf_gyro_bias_handset", "dukf_gyro_bias_learned"),
     ("motion-compensated + bias", "motion_compensated_handset", "motion_compensated_learned"),
     ("speed-aided (BEVO's)", "speed_aided_handset", "speed_aided_learned"),
+    ("speed-aided, RTS-smoothed offline", "speed_aided_smoothed_handset", "speed_aided_smoothed_learned"),
 )
 PEER_NAMES = {"madgwick": "Madgwick", "mahony": "Mahony", "ekf": "EKF", "complementary": "complementary"}
 

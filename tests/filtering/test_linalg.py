@@ -29,6 +29,21 @@ def test_cholesky_and_solves_match_numpy(n):
     np.testing.assert_allclose(linalg.logdet_from_cholesky(low), np.linalg.slogdet(a)[1], rtol=1e-12)
 
 
+def test_general_solve_pivots_and_matches_numpy_with_its_gradient():
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(40, 4, 4)) + 4 * np.eye(4)
+    # Zero leading pivots: elimination without row exchanges would divide by zero.
+    a[0] = [[0.0, 1.0, 2.0, 3.0], [1.0, 0.0, 0.0, 1.0], [2.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]]
+    a[1] = np.eye(4)[[3, 2, 1, 0]]
+    b = rng.normal(size=(40, 4, 2))
+    np.testing.assert_allclose(linalg.solve(jnp.asarray(a), jnp.asarray(b)), np.linalg.solve(a, b), rtol=1e-11, atol=1e-12)
+    np.testing.assert_allclose(linalg.solve(a[2, :1, :1], b[2, :1]), b[2, :1] / a[2, 0, 0], rtol=1e-14)
+    loss = lambda f: lambda m: jnp.sum(jnp.sin(f(m, jnp.asarray(b))))
+    np.testing.assert_allclose(
+        jax.grad(loss(linalg.solve))(jnp.asarray(a)), jax.grad(loss(jnp.linalg.solve))(jnp.asarray(a)), rtol=1e-9, atol=1e-10
+    )
+
+
 def test_batched_and_vmapped_agree():
     rng = np.random.default_rng(0)
     a = jnp.asarray(random_spd(rng, 3, (5, 2)))

@@ -141,11 +141,12 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
         def step(st, x):
             g, a, v = x
             st = f.update_lateral_tilt(f.update_speed(f.predict(st, g, a), v), g, a).astype(jnp.float32)
-            return st, st.pitch_roll
+            return st, st
 
         return jax.lax.scan(step, state, (gyro, accel, jnp.asarray(speed, jnp.float32)))[1]
 
-    estimate = np.asarray(run(state))
+    beliefs = run(state)
+    estimate = np.asarray(beliefs.pitch_roll)
     err = np.degrees(np.sqrt(np.mean((estimate[20:] - truth[20:]) ** 2, axis=0)))
     tilt = np.asarray(accel).mean(1)
     tilt_pitch = -np.arctan2(tilt[:, 0], np.hypot(tilt[:, 1], tilt[:, 2]))
@@ -153,3 +154,10 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
     assert tilt_err > 2.0
     print("speed-aided pitch, roll RMSE (deg):", err, "tilt-only pitch RMSE:", tilt_err)
     assert err[0] < 0.3 and err[1] < 0.3, err
+    # Offline, the RTS smoother over the same beliefs uses the frames after each one too.
+    smoothed = np.asarray(jax.jit(f.smooth)(beliefs, gyro, accel).pitch_roll)
+    smoothed_err = np.degrees(np.sqrt(np.mean((smoothed[20:] - truth[20:]) ** 2, axis=0)))
+    print("smoothed pitch, roll RMSE (deg):", smoothed_err)
+    assert np.all(smoothed_err < 0.8 * err), (smoothed_err, err)
+    with pytest.raises(ValueError, match="must share T"):
+        f.smooth(beliefs, gyro[1:], accel[1:])

@@ -137,6 +137,34 @@ def cho_solve(low: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) 
     return solve_upper_transposed(low, solve_lower(low, b))
 
 
+def solve(a: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> Float[Array, "... n k"]:
+    """Solve ``a @ x = b`` for a general (non-symmetric) ``a``: Gaussian elimination with partial
+    pivoting on ``[a | b]``, then back substitution. The pivot row is chosen per batch element
+    and moved by a one-hot select (no gather, no LAPACK call), so the whole solve is elementwise
+    code that XLA fuses and vectorises over the batch axes; differentiable like ``jnp.linalg.solve``
+    (the pivot choice is piecewise constant)."""
+    a, b = jnp.asarray(a), jnp.asarray(b)
+    n = a.shape[-1]
+    if n > UNROLL_MAX:
+        return jnp.linalg.solve(a, b)
+    rest = jnp.concatenate([a, b], axis=-1)  # the rows not yet eliminated, columns j.. of [a | b]
+    rows = []  # row j of the upper-triangular system: columns j.. of [U | c]
+    for j in range(n):
+        pick = jnp.arange(n - j) == jnp.argmax(jnp.abs(rest[..., :, 0]), axis=-1)[..., None]
+        pivot = jnp.sum(jnp.where(pick[..., None], rest, 0.0), axis=-2)
+        # The pivot's place takes the first row; the first row's slot is then dropped.
+        others = jnp.where(pick[..., None], rest[..., :1, :], rest)[..., 1:, :]
+        rest = others[..., :, 1:] - (others[..., :, 0] / pivot[..., 0, None])[..., None] * pivot[..., None, 1:]
+        rows.append(pivot)
+    xs: dict[int, Array] = {}
+    for i in reversed(range(n)):
+        acc = rows[i][..., n - i :]
+        for k in range(i + 1, n):
+            acc = acc - rows[i][..., k - i, None] * xs[k]
+        xs[i] = acc / rows[i][..., 0, None]
+    return jnp.stack([xs[i] for i in range(n)], axis=-2)
+
+
 def logdet_from_cholesky(low: Float[ArrayLike, "... n n"]) -> Float[Array, "..."]:
     """``log det(low @ low^T)`` from the lower Cholesky factor."""
     low = jnp.asarray(low)

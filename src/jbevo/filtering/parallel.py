@@ -104,8 +104,8 @@ def _filter_elements(model: AffineModel, prior: GaussianState) -> _FilterElement
     mean = jnp.concatenate([m1[None], u[1:]])
     ht = jnp.swapaxes(h, -1, -2)
     s = linalg.symmetrize(h @ start @ ht + r)
-    low = jnp.linalg.cholesky(s)
-    gain_t = jax.scipy.linalg.cho_solve((low, True), h @ start)  # K^T = S^-1 H P
+    low = linalg.cholesky(s)
+    gain_t = linalg.cho_solve(low, h @ start)  # K^T = S^-1 H P
     gain = jnp.swapaxes(gain_t, -1, -2)
     innovation = z - jnp.einsum("tmn,tn->tm", h, mean) - d
     i_kh = jnp.eye(n, dtype=f.dtype) - gain @ h
@@ -113,8 +113,8 @@ def _filter_elements(model: AffineModel, prior: GaussianState) -> _FilterElement
     b = mean + jnp.einsum("tnm,tm->tn", gain, innovation)
     c = linalg.symmetrize(i_kh @ start)
     ft = jnp.swapaxes(f, -1, -2)
-    s_inv_h = jax.scipy.linalg.cho_solve((low, True), h)
-    eta = jnp.einsum("tnk,tk->tn", ft @ ht, jax.scipy.linalg.cho_solve((low, True), innovation[..., None])[..., 0])
+    s_inv_h = linalg.cho_solve(low, h)
+    eta = jnp.einsum("tnk,tk->tn", ft @ ht, linalg.cho_solve(low, innovation[..., None])[..., 0])
     j = linalg.symmetrize(ft @ ht @ s_inv_h @ f)
     # The first element conditions on the prior, not on x_0: no dependence, no information.
     first = jnp.arange(f.shape[0]) == 0
@@ -130,8 +130,8 @@ def _combine_filter(early: _FilterElement, late: _FilterElement) -> _FilterEleme
     t = lambda x: jnp.swapaxes(x, -1, -2)
     mv = lambda m, v: jnp.einsum("...ij,...j->...i", m, v)
     # A2 (I + C1 J2)^-1 and A1^T (I + J2 C1)^-1, by solves (C1 and J2 are symmetric).
-    a2_m = t(jnp.linalg.solve(eye + late.j @ early.c, t(late.a)))
-    a1t_n = t(jnp.linalg.solve(eye + early.c @ late.j, early.a))
+    a2_m = t(linalg.solve(eye + late.j @ early.c, t(late.a)))
+    a1t_n = t(linalg.solve(eye + early.c @ late.j, early.a))
     return _FilterElement(
         a=a2_m @ early.a,
         b=mv(a2_m, early.b + mv(early.c, late.eta)) + late.b,
@@ -155,8 +155,8 @@ def _log_likelihoods(model: AffineModel, predicted: GaussianState, observed: Arr
     h = model.observation
     s = linalg.symmetrize(h @ predicted.cov @ jnp.swapaxes(h, -1, -2) + model.observation_cov)
     y = model.measurements - jnp.einsum("tmn,tn->tm", h, predicted.mean) - model.observation_offset
-    low = jnp.linalg.cholesky(s)
-    e = jax.scipy.linalg.solve_triangular(low, y[..., None], lower=True)[..., 0]
+    low = linalg.cholesky(s)
+    e = linalg.solve_lower(low, y[..., None])[..., 0]
     logdet = 2.0 * jnp.sum(jnp.log(jnp.diagonal(low, axis1=-2, axis2=-1)), axis=-1)
     n_obs = jnp.sum(observed, axis=-1).astype(y.dtype)
     return -0.5 * (jnp.sum(e * e, axis=-1) + logdet + n_obs * _LOG_2PI)
@@ -191,7 +191,7 @@ def sequential_filter(model: AffineModel, prior: GaussianState, mask: Bool[Array
         mean = f @ belief.mean + u
         cov = linalg.symmetrize(f @ belief.cov @ f.T + q)
         s = linalg.symmetrize(h @ cov @ h.T + r)
-        gain = jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(s, lower=True), h @ cov).T
+        gain = linalg.cho_solve(linalg.cholesky(s), h @ cov).T
         new = GaussianState(mean + gain @ (z - h @ mean - d), linalg.symmetrize(cov - gain @ s @ gain.T))
         return new, new
 
@@ -215,7 +215,7 @@ def _smoother_elements(model: AffineModel, filtered: AffineFilterResult) -> _Smo
     p, m = covs[:-1], means[:-1]
     pf = p @ jnp.swapaxes(f, -1, -2)
     predicted = linalg.symmetrize(f @ pf + q)
-    e = jnp.swapaxes(jax.scipy.linalg.cho_solve((jnp.linalg.cholesky(predicted), True), jnp.swapaxes(pf, -1, -2)), -1, -2)
+    e = jnp.swapaxes(linalg.cho_solve(linalg.cholesky(predicted), jnp.swapaxes(pf, -1, -2)), -1, -2)
     g = m - jnp.einsum("tij,tj->ti", e, jnp.einsum("tij,tj->ti", f, m) + u)
     l = linalg.symmetrize(p - e @ f @ p)  # noqa: E741
     last = _SmootherElement(jnp.zeros_like(covs[-1:]), means[-1:], covs[-1:])

@@ -53,9 +53,25 @@ def smooth(
     """The unscented RTS smoother (module docstring) over ``result``, the output of
     :func:`jbevo.filtering.ukf.filter` run with the same ``model``, ``controls``, ``motion_cov``
     (Q, constant or with a leading time axis) and ``scheme``."""
-    means, covs = result.filtered_mean, result.filtered_cov
+    return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme)
+
+
+def smooth_beliefs(
+    model: StateSpaceModel,
+    means: Float[Array, "T n"],
+    covs: Float[Array, "T n n"],
+    controls: Any,
+    motion_cov: Float[Array, "n n"] | Float[Array, "T n n"],
+    *,
+    scheme: Scheme = MerweScaled(),
+) -> SmootherResult:
+    """:func:`smooth` over filtered beliefs given as arrays (``means[t]``, ``covs[t]``: the belief
+    after step ``t``'s motion with ``controls[t]`` and its updates), for filters that are not one
+    :func:`jbevo.filtering.ukf.filter` call (several updates per step, robust or linear ones)."""
     if means.ndim != 2 or covs.shape != (*means.shape, means.shape[-1]):
-        raise ValueError(f"result must hold filtered means (T, n) and covariances (T, n, n), got {means.shape} and {covs.shape}")
+        raise ValueError(
+            f"the filtered beliefs must be means (T, n) and covariances (T, n, n), got {means.shape} and {covs.shape}"
+        )
     steps, n = means.shape
     motion_cov = jnp.asarray(motion_cov, means.dtype)
     if motion_cov.shape not in ((n, n), (steps, n, n)):
@@ -96,4 +112,4 @@ def smooth(
     )
 
 
-__all__ = ["SmootherResult", "smooth"]
+__all__ = ["SmootherResult", "smooth", "smooth_beliefs"]

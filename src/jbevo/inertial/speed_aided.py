@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from jbevo.filtering import ukf
+from jbevo.filtering import smoother, ukf
 from jbevo.filtering.noise import DiagonalCovariance
 from jbevo.inertial.attitude_filter import FilterNoise
 from jbevo.inertial.kinematics import GRAVITY, euler_rates, fill_missing, valid_mean
@@ -38,7 +38,8 @@ _PITCH, _ROLL, _BIAS, _SPEED = 0, 1, slice(2, 5), 5
 
 
 class AttitudeState(NamedTuple):
-    """The speed-aided filter's Gaussian belief (:data:`SPEED_AIDED_STATE`), with named views."""
+    """The speed-aided filter's Gaussian belief (:data:`SPEED_AIDED_STATE`), with named views
+    (which also read a stack of beliefs with leading axes, as a ``lax.scan`` returns them)."""
 
     mean: Float[Array, " 6"]
     cov: Float[Array, "6 6"]
@@ -61,28 +62,28 @@ class AttitudeState(NamedTuple):
 
     @property
     def pitch(self) -> Float[Array, ""]:
-        return self.mean[_PITCH]
+        return self.mean[..., _PITCH]
 
     @property
     def roll(self) -> Float[Array, ""]:
-        return self.mean[_ROLL]
+        return self.mean[..., _ROLL]
 
     @property
     def pitch_roll(self) -> Float[Array, " 2"]:
-        return self.mean[_PITCH : _ROLL + 1]
+        return self.mean[..., _PITCH : _ROLL + 1]
 
     @property
     def gyro_bias(self) -> Float[Array, " 3"]:
         """The gyro's bias ``(x, y, z)`` (rad/s); ``y`` is the pitch rate's."""
-        return self.mean[_BIAS]
+        return self.mean[..., _BIAS]
 
     @property
     def pitch_rate_bias(self) -> Float[Array, ""]:
-        return self.mean[_BIAS][1]
+        return self.mean[..., _BIAS][..., 1]
 
     @property
     def speed(self) -> Float[Array, ""]:
-        return self.mean[_SPEED]
+        return self.mean[..., _SPEED]
 
     def gaussian(self) -> ukf.GaussianState:
         return ukf.GaussianState(self.mean, self.cov)
@@ -174,6 +175,20 @@ class SpeedAidedAttitude(FilterNoise):
         model = speed_aided_model(self.dt)
         moved = ukf.predict(model, state.gaussian(), (fill_missing(gyro), fill_missing(accel)), self.motion_noise())
         return AttitudeState(*moved)
+
+    def smooth(self, beliefs: AttitudeState, gyro: Float[Array, "T S 3"], accel: Float[Array, "T S 3"]) -> AttitudeState:
+        """Offline: the unscented RTS smoother over this filter's per-frame ``beliefs`` (a stacked
+        :class:`AttitudeState`, the belief after frame ``t``'s :meth:`predict` through
+        ``gyro[t]``, ``accel[t]`` and its updates), with the same motion and noise. Each frame's
+        estimate then uses the frames after it too."""
+        if beliefs.mean.ndim != 2 or gyro.shape[:1] != beliefs.mean.shape[:1] or accel.shape != gyro.shape:
+            raise ValueError(
+                f"beliefs (T, 6), gyro and accel (T, S, 3) must share T; got {beliefs.mean.shape}, {gyro.shape}, {accel.shape}"
+            )
+        controls = (jax.vmap(fill_missing)(gyro), jax.vmap(fill_missing)(accel))
+        q = self.motion_noise().astype(beliefs.mean.dtype)
+        out = smoother.smooth_beliefs(speed_aided_model(self.dt), beliefs.mean, beliefs.cov, controls, q)
+        return AttitudeState(out.smoothed_mean, out.smoothed_cov)
 
     def _std(self) -> Float[Array, " 2"]:
         return jnp.exp(self.measurement_noise.log_std)
