@@ -101,7 +101,12 @@ def make_cuthbertlib_runner(smoothed: bool = False):
     from cuthbertlib.quadrature.linearize import functional
 
     quadrature = unscented.weights(3, alpha=ALPHA, beta=BETA, kappa=KAPPA)
-    chol_q, chol_r = jnp.linalg.cholesky(jnp.asarray(Q)), jnp.linalg.cholesky(jnp.asarray(R))
+    # cuthbertlib 0.1.1 averages the noise covariance over the sigma points with the covariance
+    # weights, which sum to 1 + (1 - alpha^2 + beta) = 3 here, not 1: an additive noise given to it
+    # comes out tripled. The factors are scaled so that it returns Q and R themselves.
+    unbias = 1.0 / jnp.sqrt(jnp.sum(quadrature.wc))
+    chol_q = unbias * jnp.linalg.cholesky(jnp.asarray(Q))
+    chol_r = unbias * jnp.linalg.cholesky(jnp.asarray(R))
 
     def motion(u):
         def f(x):

@@ -155,6 +155,62 @@ def parallel_in_time() -> str:
     )
 
 
+def ukf_cuthbertlib_agreement() -> str:
+    d = record("benchmarks/results/ukf.json")
+    return f"{d['max_abs_diff_vs_cuthbertlib']:.1e} and {d['max_abs_diff_smoother_vs_cuthbertlib']:.1e}"
+
+
+def parallel_in_time_summary() -> str:
+    d = record("benchmarks/results/parallel_in_time.json")["by_steps"]
+    steps = sorted(d, key=int)
+    ratios = [d[t]["parallel_over_sequential"]["ipls_iteration"] for t in steps]
+    # The crossover: the shortest length from which on every measured length favours parallel.
+    cross = next((t for i, t in enumerate(steps) if all(r <= 1.0 for r in ratios[i:])), None)
+    times = ", ".join(f"{r:.2f}" for r in ratios)
+    lengths = ", ".join(f"{int(t):,}" for t in steps)
+    where = (
+        f"at least as fast as the sequential one from T = {int(cross):,} on"
+        if cross
+        else "slower than the sequential one at every length measured"
+    )
+    worst = max(d[t]["max_abs_diff_parallel_vs_sequential"]["smoothed_mean"] for t in steps)
+    return (
+        f"One parallel iteration takes {times} times the sequential one's time at T = {lengths}: on this CPU it is "
+        f"{where}; the two agree to {worst:.0e} at every length."
+    )
+
+
+def localization_smoothing() -> str:
+    d = record("experiments/results/localization_smoothing.json")
+    rows = []
+    for kind, entry in sorted(d["kinds"].items()):
+        for condition, c in sorted(entry["conditions"].items()):
+            f, sm = c["filtered"], c["smoothed"]
+            rows.append(
+                [
+                    f"{kind}, {condition}",
+                    num(f["mean_position_error_m"], 3),
+                    num(sm["mean_position_error_m"], 3),
+                    num(f["max_position_error_m"], 3),
+                    num(sm["max_position_error_m"], 3),
+                    num(f["mean_yaw_error_deg"], 3),
+                    num(sm["mean_yaw_error_deg"], 3),
+                ]
+            )
+    return table(
+        [
+            "test quarter, hand-set BEVO+",
+            "mean error (m), filtered",
+            "smoothed",
+            "max error (m), filtered",
+            "smoothed",
+            "mean yaw error (deg), filtered",
+            "smoothed",
+        ],
+        rows,
+    )
+
+
 def ukf_agreement() -> str:
     d = record("benchmarks/results/ukf.json")
     return f"{d['max_abs_diff_vs_filterpy']:.1e} and {d['max_abs_diff_vs_dynamax']:.1e}"
@@ -627,12 +683,15 @@ TABLES: dict[str, Callable[[], str]] = {
     "localization_carla": localization_carla,
     "localization_aeroground": localization_aeroground,
     "localization_validation": localization_validation,
+    "localization_smoothing": localization_smoothing,
     "reference_metrics": reference_metrics,
 }
 
 VALUES: dict[str, Callable[[], str]] = {
     "attitude_world_tilt": attitude_world_tilt,
     "ukf_agreement": ukf_agreement,
+    "parallel_in_time_summary": parallel_in_time_summary,
+    "ukf_cuthbertlib_agreement": ukf_cuthbertlib_agreement,
     "builtin_best_epochs": builtin_best_epochs,
     "builtin_wins": builtin_wins,
     "kitti_wins": kitti_wins,

@@ -14,13 +14,19 @@ from tests.helpers import check_leaf_gradients
 
 pytestmark = pytest.mark.usefixtures("float64")
 
+# Compiled once and shared: run eagerly, every level of the associative scan dispatches (and
+# compiles) its small operations one by one. One length for every test, not a power of two.
+STEPS = 33
+parallel_filter, parallel_smooth = jax.jit(parallel.filter), jax.jit(parallel.smooth)
+sequential_filter, sequential_smoother = jax.jit(parallel.sequential_filter), jax.jit(parallel.sequential_smoother)
+
 
 def spd(rng, k, scale):
     a = rng.normal(size=(k, k))
     return scale * (a @ a.T / k + 0.2 * np.eye(k))
 
 
-def random_model(steps=120, n=3, m=2, seed=0):
+def random_model(steps=STEPS, n=3, m=2, seed=0):
     rng = np.random.default_rng(seed)
     z = rng.normal(size=(steps, m))
     z[10] = np.nan  # a step without a measurement
@@ -73,27 +79,27 @@ def filterpy_reference(model, prior):
 
 def test_parallel_equals_sequential_and_filterpy():
     model, prior = random_model()
-    par = parallel.filter(model, prior)
-    seq = parallel.sequential_filter(model, prior)
+    par = parallel_filter(model, prior)
+    seq = sequential_filter(model, prior)
     for a, b in zip(par, seq, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-11)
     means, covs, s_means, s_covs = filterpy_reference(model, prior)
     np.testing.assert_allclose(par.filtered_mean, means, atol=1e-10)
     np.testing.assert_allclose(par.filtered_cov, covs, atol=1e-10)
-    smoothed = parallel.smooth(model, par)
-    np.testing.assert_allclose(smoothed.mean, parallel.sequential_smoother(model, seq).mean, atol=1e-11)
-    np.testing.assert_allclose(smoothed.cov, parallel.sequential_smoother(model, seq).cov, atol=1e-11)
+    smoothed, sequential = parallel_smooth(model, par), sequential_smoother(model, seq)
+    np.testing.assert_allclose(smoothed.mean, sequential.mean, atol=1e-11)
+    np.testing.assert_allclose(smoothed.cov, sequential.cov, atol=1e-11)
     np.testing.assert_allclose(smoothed.mean, s_means, atol=1e-9)
     np.testing.assert_allclose(smoothed.cov, s_covs, atol=1e-9)
 
 
 def test_missing_entries_equal_masked_ones_and_a_step_without_data_is_a_prediction():
-    model, prior = random_model(steps=40)
+    model, prior = random_model()
     z = np.asarray(model.measurements)
     mask = np.isfinite(z)
     mask[30] = False
-    with_nan = parallel.filter(model._replace(measurements=jnp.asarray(np.where(mask, z, np.nan))), prior)
-    masked = parallel.filter(model._replace(measurements=jnp.asarray(np.where(mask, z, 123.0))), prior, mask=jnp.asarray(mask))
+    with_nan = parallel_filter(model._replace(measurements=jnp.asarray(np.where(mask, z, np.nan))), prior)
+    masked = parallel_filter(model._replace(measurements=jnp.asarray(np.where(mask, z, 123.0))), prior, mask=jnp.asarray(mask))
     for a, b in zip(with_nan, masked, strict=True):
         np.testing.assert_allclose(a, b, atol=1e-12)
     np.testing.assert_allclose(masked.filtered_mean[30], masked.predicted_mean[30], atol=1e-12)
@@ -103,7 +109,7 @@ def test_missing_entries_equal_masked_ones_and_a_step_without_data_is_a_predicti
 
 
 def test_runs_under_jit_and_vmap():
-    model, prior = random_model(steps=33)  # not a power of two
+    model, prior = random_model()
     run = jax.jit(lambda model: parallel.smooth(model, parallel.filter(model, prior)).mean)
     shifted = model._replace(measurements=model.measurements + 0.5)
     batch = jax.tree.map(lambda a, b: jnp.stack([a, b]), model, shifted)
@@ -111,7 +117,7 @@ def test_runs_under_jit_and_vmap():
 
 
 def test_gradients_match_finite_differences():
-    model, prior = random_model(steps=16)
+    model, prior = random_model()
 
     def loss(params):
         m = model._replace(
@@ -123,5 +129,5 @@ def test_gradients_match_finite_differences():
         return jnp.sum(filtered.log_likelihoods) + jnp.sum(smoothed.mean**2)
 
     params = {"q": jnp.array(0.1), "r": jnp.array(-0.2)}
-    grads = jax.grad(loss)(params)
+    grads = jax.jit(jax.grad(loss))(params)
     assert check_leaf_gradients(jax.jit(loss), grads, params, abs_tol=1e-7, rel_tol=1e-5) == 2

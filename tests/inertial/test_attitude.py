@@ -155,7 +155,7 @@ def test_speed_aided_filter_holds_pitch_through_accelerations():
     print("speed-aided pitch, roll RMSE (deg):", err, "tilt-only pitch RMSE:", tilt_err)
     assert err[0] < 0.3 and err[1] < 0.3, err
     # Offline, the RTS smoother over the same beliefs uses the frames after each one too.
-    smoothed = np.asarray(jax.jit(f.smooth)(beliefs, gyro, accel).pitch_roll)
+    smoothed = np.asarray(jax.jit(lambda b, g, a: f.smooth(b, g, a))(beliefs, gyro, accel).pitch_roll)
     smoothed_err = np.degrees(np.sqrt(np.mean((smoothed[20:] - truth[20:]) ** 2, axis=0)))
     print("smoothed pitch, roll RMSE (deg):", smoothed_err)
     assert np.all(smoothed_err < 0.8 * err), (smoothed_err, err)

@@ -41,8 +41,8 @@ class AttitudeState(NamedTuple):
     """The speed-aided filter's Gaussian belief (:data:`SPEED_AIDED_STATE`), with named views
     (which also read a stack of beliefs with leading axes, as a ``lax.scan`` returns them)."""
 
-    mean: Float[Array, " 6"]
-    cov: Float[Array, "6 6"]
+    mean: Float[Array, "*batch 6"]
+    cov: Float[Array, "*batch 6 6"]
 
     @classmethod
     def initial(
@@ -61,28 +61,28 @@ class AttitudeState(NamedTuple):
         return cls(mean, jnp.diag(std**2))
 
     @property
-    def pitch(self) -> Float[Array, ""]:
+    def pitch(self) -> Float[Array, "*batch"]:
         return self.mean[..., _PITCH]
 
     @property
-    def roll(self) -> Float[Array, ""]:
+    def roll(self) -> Float[Array, "*batch"]:
         return self.mean[..., _ROLL]
 
     @property
-    def pitch_roll(self) -> Float[Array, " 2"]:
+    def pitch_roll(self) -> Float[Array, "*batch 2"]:
         return self.mean[..., _PITCH : _ROLL + 1]
 
     @property
-    def gyro_bias(self) -> Float[Array, " 3"]:
+    def gyro_bias(self) -> Float[Array, "*batch 3"]:
         """The gyro's bias ``(x, y, z)`` (rad/s); ``y`` is the pitch rate's."""
         return self.mean[..., _BIAS]
 
     @property
-    def pitch_rate_bias(self) -> Float[Array, ""]:
+    def pitch_rate_bias(self) -> Float[Array, "*batch"]:
         return self.mean[..., _BIAS][..., 1]
 
     @property
-    def speed(self) -> Float[Array, ""]:
+    def speed(self) -> Float[Array, "*batch"]:
         return self.mean[..., _SPEED]
 
     def gaussian(self) -> ukf.GaussianState:
