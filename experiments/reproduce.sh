@@ -8,6 +8,7 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 : "${JBEVO_REFERENCE_DATA:?set JBEVO_REFERENCE_DATA to the reference-data folder}"
 
 python benchmarks/ukf.py
+python benchmarks/parallel_in_time.py
 python benchmarks/registration.py
 python benchmarks/bev.py
 python benchmarks/simulator.py
@@ -21,4 +22,5 @@ python experiments/builtin_training.py
 python experiments/kitti_odometry.py
 python experiments/kitti_odometry.py --real-imu
 python experiments/localization.py
+python experiments/localization_smoothing.py
 python docs/build.py
