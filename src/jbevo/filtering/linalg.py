@@ -156,13 +156,10 @@ def solve(a: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> Flo
         others = jnp.where(pick[..., None], rest[..., :1, :], rest)[..., 1:, :]
         rest = others[..., :, 1:] - (others[..., :, 0] / pivot[..., 0, None])[..., None] * pivot[..., None, 1:]
         rows.append(pivot)
-    xs: dict[int, Array] = {}
-    for i in reversed(range(n)):
-        acc = rows[i][..., n - i :]
-        for k in range(i + 1, n):
-            acc = acc - rows[i][..., k - i, None] * xs[k]
-        xs[i] = acc / rows[i][..., 0, None]
-    return jnp.stack([xs[i] for i in range(n)], axis=-2)
+    zeros = jnp.zeros_like(a[..., 0, :])
+    upper = jnp.stack([jnp.concatenate([zeros[..., :j], r[..., : n - j]], axis=-1) for j, r in enumerate(rows)], axis=-2)
+    rhs = jnp.stack([r[..., n - j :] for j, r in enumerate(rows)], axis=-2)
+    return solve_upper_transposed(jnp.swapaxes(upper, -1, -2), rhs)
 
 
 def logdet_from_cholesky(low: Float[ArrayLike, "... n n"]) -> Float[Array, "..."]:
