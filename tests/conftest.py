@@ -42,7 +42,7 @@ def as_users_run():
         jaxtyping.config.update("jaxtyping_disable", False)
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def reference_data() -> Path:
     """The shared reference-data folder; skips the test when it is not configured."""
     root = os.environ.get("JBEVO_REFERENCE_DATA")

@@ -87,3 +87,46 @@ def test_published_calibration_chain_is_a_small_rotation(reference_data):
     r = body_from_camera_rotation(t[:3, :3])
     angle = np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1)))
     assert 0.3 < angle < 1.5
+
+
+def test_a_run_folder_reads_with_the_whole_sequences_times(reference_data, tmp_path):
+    run = reference_data / "realdata" / "kitti_odometry_07_first160"
+    seq = kitti.read_run(run, imu=reference_data / "kitti_odom" / "imu" / "07.mat")
+    assert seq.images.shape == (160, 370, 1226) and seq.gyro.shape == (160, 10, 3)
+    times = np.loadtxt(run / "times.txt")
+    assert len(times) == 1101  # the whole sequence's: the run keeps its first 160
+    np.testing.assert_allclose(np.asarray(seq.frame_times, float), times[:160], atol=1e-6)
+    assert float(seq.camera.intrinsics[0, 0]) == pytest.approx(707.0912, abs=1e-3)
+    np.testing.assert_allclose(np.asarray(seq.planar[0]), 0.0, atol=1e-6)
+    (tmp_path / "image_0").symlink_to(run / "image_0")
+    for name in ("times.txt", "calib.txt"):
+        (tmp_path / name).symlink_to(run / name)
+    (tmp_path / "poses.txt").write_text("".join((run / "poses.txt").read_text().splitlines(keepends=True)[:100]))
+    with pytest.raises(ValueError, match="100 poses for 160 images"):
+        kitti.read_run(tmp_path)
+    with pytest.raises(FileNotFoundError, match="missing run folder"):
+        kitti.read_run(tmp_path / "absent")
+
+
+def test_a_calibrated_run_has_the_levelled_truth_and_the_calibrated_imu(reference_data):
+    from jbevo.inertial import calibration as cal
+    from jbevo.inertial import kitti_imu
+
+    poses, imu = reference_data / "kitti_odom" / "gt_poses", reference_data / "kitti_odom" / "imu"
+    raw = kitti.read_run(reference_data / "realdata" / "kitti_odometry_06_first51", imu=imu / "06.mat")
+    calibration = cal.calibrate([kitti_imu.calibration_drive(poses, imu, n) for n in ("04", "05", "08")])
+    drive = kitti_imu.calibrated_drive(poses, imu, "06", calibration=calibration)
+    seq = kitti_imu.calibrated_sequence(raw, drive)
+    # KITTI's truth starts level (the first camera pose); against gravity the car is ~1.1 deg
+    # nose down and ~2.3 deg rolled at frame 0.
+    np.testing.assert_allclose(np.asarray(raw.pitch_roll[0]), 0.0, atol=1e-6)
+    assert np.degrees(float(seq.pitch_roll[0, 0])) == pytest.approx(1.1, abs=0.2)
+    assert np.degrees(float(seq.pitch_roll[0, 1])) == pytest.approx(2.3, abs=0.3)
+    np.testing.assert_allclose(np.asarray(seq.gyro), drive.gyro[:51], rtol=1e-6)
+    np.testing.assert_allclose(
+        np.linalg.norm(np.diff(np.asarray(seq.planar[:, :2]), axis=0), axis=1),
+        np.linalg.norm(np.diff(np.asarray(raw.planar[:, :2]), axis=0), axis=1),
+        atol=1e-3,
+    )
+    with pytest.raises(ValueError, match="not the same drive"):
+        kitti_imu.calibrated_sequence(raw, kitti_imu.calibrated_drive(poses, imu, "07", calibration=calibration))

@@ -155,21 +155,51 @@ def read_odometry(
     if len(times) != n:
         raise ValueError(f"{folder}: {n} images but {len(times)} times")
     pose_file = root / "poses" / f"{sequence}.txt"
-    if pose_file.is_file():
-        rows = _numbers(pose_file, 12)
-        if len(rows) != n:
-            raise ValueError(f"{pose_file}: {len(rows)} poses for {n} images")
-        cam = np.tile(np.eye(4), (n, 1, 1))
-        cam[:, :3, :] = np.stack(rows).reshape(n, 3, 4)
-        poses = body_poses_from_kitti(cam)
-    else:
-        poses = np.full((n, 4, 4), np.nan)
-    if imu is None:
-        nan = np.full((n, 1, 3), np.nan)
-        imu_times, gyro, accel = times[:, None], nan, nan
-    else:
-        imu_times, gyro, accel = group_blocks(read_kitti_imu(_imu_file(imu, sequence), times), times)
-    return _sequence(images, times, imu_times, gyro, accel, _camera(p0, images.shape[1:], camera_height), poses)
+    poses = _body_poses(pose_file, n) if pose_file.is_file() else np.full((n, 4, 4), np.nan)
+    blocks = _imu_blocks(None if imu is None else _imu_file(imu, sequence), times)
+    return _sequence(images, times, *blocks, _camera(p0, images.shape[1:], camera_height), poses)
+
+
+def _body_poses(pose_file: Path, n: int) -> np.ndarray:
+    """The body poses of a KITTI pose file that must have ``n`` lines."""
+    rows = _numbers(pose_file, 12)
+    if len(rows) != n:
+        raise ValueError(f"{pose_file}: {len(rows)} poses for {n} images")
+    cam = np.tile(np.eye(4), (n, 1, 1))
+    cam[:, :3, :] = np.stack(rows).reshape(n, 3, 4)
+    return body_poses_from_kitti(cam)
+
+
+def _imu_blocks(imu_file: Path | str | None, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame blocks of a KITTI odometry IMU file, or NaN blocks of one sample without it."""
+    if imu_file is None:
+        nan = np.full((len(times), 1, 3), np.nan)
+        return times[:, None], nan, nan
+    return group_blocks(read_kitti_imu(imu_file, times), times)
+
+
+def read_run(folder: str | Path, imu: str | Path | None = None, camera_height: float = CAMERA_HEIGHT) -> Sequence:
+    """One KITTI odometry run kept in a single folder: ``image_0/*.png``, ``times.txt``,
+    ``calib.txt`` (with ``P0``) and ``poses.txt`` (the ground truth of these frames), as the first
+    frames of a sequence are often shipped. ``times.txt`` may be the whole sequence's (longer than
+    the images: its first lines are these frames'); ``poses.txt`` must have one line per image.
+    ``imu``: the sequence's KITTI odometry IMU file ``NN.mat`` (:func:`read_kitti_imu`; cut to
+    these frames); without it the IMU arrays are NaN."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"missing run folder {folder}")
+    images = _images(folder / "image_0")
+    n = len(images)
+    times = np.concatenate(_numbers(folder / "times.txt", 1))
+    if len(times) < n:
+        raise ValueError(f"{folder / 'times.txt'}: {len(times)} times for {n} images")
+    times = times[:n]
+    calib = _calibration_rows(folder / "calib.txt")
+    if calib.get("P0", np.array([])).size != 12:
+        raise ValueError(f"{folder / 'calib.txt'} has no P0 line (12 numbers)")
+    poses = _body_poses(folder / "poses.txt", n)
+    camera = _camera(calib["P0"].reshape(3, 4), images.shape[1:], camera_height)
+    return _sequence(images, times, *_imu_blocks(imu, times), camera, poses)
 
 
 def has_imu(seq: Sequence) -> bool:
@@ -383,6 +413,7 @@ __all__ = [
     "read_odometry",
     "read_oxts",
     "read_raw",
+    "read_run",
     "write_odometry",
     "write_raw",
 ]

@@ -16,12 +16,15 @@ import functools
 from pathlib import Path
 from typing import NamedTuple
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from jbevo.data.imu_stream import resample_blocks
 from jbevo.data.kitti import read_kitti_imu
 from jbevo.data.kitti_frames import body_poses_from_kitti
 from jbevo.data.pose_files import read_kitti
+from jbevo.data.sequence import Sequence, check
 from jbevo.data.splits import KITTI_TRAIN
 from jbevo.inertial import calibration as cal
 
@@ -84,7 +87,32 @@ def calibrated_drive(
     return CalibratedImuDrive(drive.frame_times, cal.level_poses(drive.body_poses, gravity.up), times, gyro, accel, gravity)
 
 
+def calibrated_sequence(seq: Sequence, drive: CalibratedImuDrive) -> Sequence:
+    """``seq``, the first frames of a KITTI odometry sequence (e.g. read with
+    :func:`jbevo.data.kitti.read_run`), with its IMU and ground truth replaced by those of the
+    same sequence's calibrated ``drive`` (:func:`calibrated_drive`): the calibrated IMU in frame
+    blocks, and the truth levelled against gravity, so that its pitch and roll are the body's
+    against gravity (KITTI's own are against the first camera pose). Frame times are the drive's
+    (nominal :data:`FRAME_STEP_S`)."""
+    n = seq.num_frames
+    if len(drive.frame_times) < n:
+        raise ValueError(f"the calibrated drive has {len(drive.frame_times)} frames, the sequence {n}")
+    first = np.asarray(seq.poses[0], float)
+    if np.all(np.isfinite(first)):
+        # The drive's truth must be this sequence's: the same motion from frame 0 to frame 1.
+        step = np.linalg.norm(np.asarray(seq.poses[1, :3, 3], float) - first[:3, 3]) if n > 1 else 0.0
+        drive_step = np.linalg.norm(drive.body_poses[1, :3, 3] - drive.body_poses[0, :3, 3]) if n > 1 else 0.0
+        if abs(step - drive_step) > 1e-3:
+            raise ValueError(
+                f"the calibrated drive's first step is {drive_step:.4f} m, the sequence's {step:.4f} m: not the same drive"
+            )
+    replace = (drive.frame_times[:n], drive.imu_times[:n], drive.gyro[:n], drive.accel[:n], drive.body_poses[:n])
+    arrays = tuple(jnp.asarray(a, jnp.float32 if i == 4 else None) for i, a in enumerate(replace))
+    return check(eqx.tree_at(lambda q: (q.frame_times, q.imu_times, q.gyro, q.accel, q.poses), seq, arrays))
+
+
 __all__ = [
+    "calibrated_sequence",
     "FRAME_STEP_S",
     "RECORDING_DAYS",
     "SAMPLES_PER_FRAME",

@@ -56,10 +56,12 @@ from jbevo.geometry.se2 import se2_compose
 from jbevo.inertial.kinematics import GRAVITY, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements, valid_mean
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 from jbevo.models.parameters import num_learnable
+from jbevo.models.yaw_fusion import YawFusion
 from jbevo.vision.bands import BandGeometry
 from jbevo.vision.bev import bev_increment, feathered_bev
 from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.registration import Registration, register
+from jbevo.vision.road_view import RoadView
 
 ATTITUDE_SOURCES = ("filter", "zero", "accel", "truth")
 
@@ -120,6 +122,11 @@ class Bevo(eqx.Module):
         bands: :class:`jbevo.vision.bands.BandGeometry`, or None (off): the near and far halves
             of the BEV pair measure the pitch and the pitch-rate bias, give the forward motion free
             of the pitch error and the yaw free of the roll error.
+        road: :class:`jbevo.vision.road_view.RoadView`, or None (off): the camera's pitch, roll
+            and height against the road on top of the body's attitude and the nominal height,
+            and the road corridor that fades the BEV's columns beside the lane (real streets).
+        yaw_fusion: :class:`jbevo.models.yaw_fusion.YawFusion`, or None (off): the turn is DPC's
+            rotation averaged with the gyro's yaw increment by inverse variance.
 
     Example::
 
@@ -137,6 +144,8 @@ class Bevo(eqx.Module):
     attitude_source: str = eqx.field(static=True, default="filter")
     gyro_window: float = eqx.field(static=True, default=0.0)
     bands: BandGeometry | None = None
+    road: RoadView | None = None
+    yaw_fusion: YawFusion | None = None
 
     @classmethod
     def create(
@@ -146,11 +155,14 @@ class Bevo(eqx.Module):
         attitude_source: str = "filter",
         gyro_window: float = 0.0,
         bands: bool = False,
+        road: bool = False,
+        yaw_fusion: bool = False,
         **dpc_kwargs,
     ) -> Bevo:
         """Hand-set defaults: :meth:`SpeedAidedAttitude.create`, DPC's defaults with 256
-        angles, a 128 x 128 BEV at 0.1 m from 7.5 m ahead, and with ``bands``
-        :meth:`BandGeometry.create`."""
+        angles, a 128 x 128 BEV at 0.1 m from 7.5 m ahead, with ``bands``
+        :meth:`BandGeometry.create`, with ``road`` :meth:`RoadView.create` and with ``yaw_fusion``
+        :meth:`YawFusion.create`."""
         if attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source must be one of {ATTITUDE_SOURCES}, got {attitude_source!r}")
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
@@ -163,6 +175,8 @@ class Bevo(eqx.Module):
             attitude_source,
             float(gyro_window),
             BandGeometry.create() if bands else None,
+            RoadView.create() if road else None,
+            YawFusion.create() if yaw_fusion else None,
         )
 
     def num_learnable(self) -> int:
@@ -228,13 +242,22 @@ class Bevo(eqx.Module):
         return frame.true_pitch_roll.astype(dtype)
 
     def bev(self, image: UInt8[Array, "H W"], pitch_roll: Float[Array, " 2"], camera: Camera) -> Float[Array, "h w"]:
-        """The feathered BEV of an 8-bit image at ``pitch_roll`` (:func:`jbevo.vision.bev.feathered_bev`)."""
-        return feathered_bev(image, pitch_roll[0], pitch_roll[1], camera, self.grid, self.feather)
+        """The feathered BEV of an 8-bit image at the body's ``pitch_roll``
+        (:func:`jbevo.vision.bev.feathered_bev`); with ``road``, at the camera's attitude and
+        height against the road and with the columns outside the road corridor faded."""
+        if self.road is None:
+            return feathered_bev(image, pitch_roll[0], pitch_roll[1], camera, self.grid, self.feather)
+        pitch, roll = self.road.attitude(pitch_roll)
+        bev = feathered_bev(image, pitch, roll, self.road.camera(camera), self.grid, self.feather)
+        return self.road.keep_road(bev, self.grid)
 
-    def _register(self, prev: Array, bev: Array, belief: AttitudeState, frame: Frame, pitch_roll: Array) -> Registration:
+    def camera_height(self, camera: Camera, dtype) -> Float[Array, ""]:
+        """The camera's height above the road the BEV assumes (metres)."""
+        return jnp.asarray(camera.height if self.road is None else self.road.height(camera), dtype)
+
+    def _register(self, prev: Array, bev: Array, gyro_turn: Array) -> Registration:
         if self.gyro_window > 0:
-            turn = gyro_yaw_increment(frame.gyro - belief.gyro_bias, pitch_roll[0], pitch_roll[1], self.attitude.dt)
-            return register(prev, bev, self.dpc, rotation_prior=-turn, prior_window=self.gyro_window)
+            return register(prev, bev, self.dpc, rotation_prior=-gyro_turn, prior_window=self.gyro_window)
         return register(prev, bev, self.dpc)
 
     def observe(self, carry: BevoCarry, frame: Frame, camera: Camera, frame_dt: float) -> Observation:
@@ -244,11 +267,12 @@ class Bevo(eqx.Module):
         belief = self.attitude.predict(carry.attitude, frame.gyro, frame.accel)
         pitch_roll = self.projection_attitude(belief, frame)
         bev = self.bev(frame.image, pitch_roll, camera)
-        reg = self._register(carry.bev, bev, belief, frame, pitch_roll)
+        gyro_turn = gyro_yaw_increment(frame.gyro - belief.gyro_bias, pitch_roll[0], pitch_roll[1], self.attitude.dt)
+        reg = self._register(carry.bev, bev, gyro_turn)
         moving = frame.number > 0
         rotation, translation = reg.rotation, reg.translation
         if self.bands is not None:
-            height = jnp.asarray(camera.height, bev.dtype)
+            height = self.camera_height(camera, bev.dtype)
             shifts = self.bands.shifts(carry.bev, bev, reg, self.grid, self.dpc)
             measured = belief
             if self.attitude_source == "filter":
@@ -259,6 +283,8 @@ class Bevo(eqx.Module):
             drift = ((belief.pitch_rate_bias - measured.pitch_rate_bias) * frame_dt).astype(bev.dtype)
             rotation, translation = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift)
             belief = measured
+        if self.yaw_fusion is not None:
+            rotation = self.yaw_fusion.fuse(rotation, gyro_turn.astype(rotation.dtype))
         increment = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
         belief = self.attitude.update_speed(belief, jnp.where(moving, increment[0] / frame_dt, jnp.nan))
         belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)

@@ -174,7 +174,11 @@ class BevoPlus(eqx.Module):
         self, image: Array, pitch_roll: Float[Array, " 2"], camera: Camera, map_: Map, pose: Float[Array, " 3"]
     ) -> MapMatch:
         """Project an 8-bit ``image`` on the map-matching grid at ``pitch_roll`` and match it
-        against the map at ``pose`` (:func:`match_to_map` with this model's parameters)."""
+        against the map at ``pose`` (:func:`match_to_map` with this model's parameters); with the
+        odometry's ``road`` view, at the camera's attitude and height against the road."""
+        road = self.odometry.road
+        if road is not None:
+            pitch_roll, camera = road.attitude(pitch_roll), road.camera(camera)
         bev, valid = bev_project(image.astype(pose.dtype) * (1.0 / 255.0), pitch_roll[0], pitch_roll[1], camera, self.map_grid)
         return match_to_map(
             bev, valid, map_, pose, self.map_grid, self.map_dpc, camera.height, jnp.exp(self.log_pitch_gain), self.map_feather

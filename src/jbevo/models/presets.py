@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from jbevo.data.synthetic.scenes import SCENE_KINDS
+from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.bevo_plus import BevoPlus
+from jbevo.vision.bands import BandGeometry
 
 #: BEVO+'s odometry searches DPC's rotation within this many radians of the gyro's turn.
 GYRO_WINDOW = float(np.radians(2.0))
@@ -21,4 +25,19 @@ def localization_model(kind: str) -> BevoPlus:
     return BevoPlus.create(Bevo.create(odometry_grid, gyro_window=GYRO_WINDOW), map_grid)
 
 
-__all__ = ["GYRO_WINDOW", "localization_model"]
+#: The KITTI-size BEV of the real-street model: 256 x 256 at 0.1 m/px from 4 m ahead.
+STREET_GRID = BevGrid(0.1, (256, 256), near=4.0)
+#: The real-street model searches DPC's rotation within this many radians of the gyro's turn.
+STREET_GYRO_WINDOW = float(np.radians(0.5))
+
+
+def street_model(imu_dt: float, grid: BevGrid = STREET_GRID, bands: bool = True) -> Bevo:
+    """The hand-set BEVO for real streets (KITTI-size frames with a calibrated IMU): the road view
+    (:class:`jbevo.vision.road_view.RoadView`: camera against the road, road corridor), the gyro's
+    turn fused with DPC's (:class:`jbevo.models.yaw_fusion.YawFusion`), DPC's rotation searched
+    within :data:`STREET_GYRO_WINDOW` of the gyro's, and with ``bands`` the robust band update."""
+    model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True)
+    return dataclasses.replace(model, bands=BandGeometry.create(robust=True) if bands else None)
+
+
+__all__ = ["GYRO_WINDOW", "STREET_GRID", "STREET_GYRO_WINDOW", "localization_model", "street_model"]

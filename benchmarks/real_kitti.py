@@ -1,0 +1,395 @@
+"""BEVO on real camera frames: the real KITTI runs in the reference data (``realdata/``: the first
+51 frames of sequence 06, the first 160 of 07, grey camera 0) with their real IMU, against their
+ground truth, and two peers on the same frames.
+
+Data. Each run is read as shipped (:func:`jbevo.data.kitti.read_run`) and, for every row but the
+``uncalibrated`` ones, with its sequence's IMU calibrated and its truth levelled against gravity
+(:func:`jbevo.inertial.kitti_imu.calibrated_sequence`). The calibration (mounting, time offset,
+gyro scale and biases) is fitted on the recording day's drives 04, 05 and 08 only, so no scored
+drive enters it. KITTI's own truth is relative to the first camera pose; the levelled truth's
+pitch and roll are against gravity, the reference every pitch/roll figure is taken against.
+
+Rows (``VARIANTS``; hand-set unless named otherwise). ``BEVO`` is the model as the synthetic
+experiments run it (:meth:`jbevo.models.Bevo.create`, the KITTI-size grid, filter attitude), with
+and without bands, on the uncalibrated and the calibrated IMU; ``street`` is
+:func:`jbevo.models.presets.street_model` (road view: camera against the road and road corridor;
+the gyro's turn fused with DPC's; robust bands where named) with the filter's, the true
+(levelled) or a zero attitude. Learned rows fit on one half of a run and are scored on the other
+(both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
+``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
+``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11). The step
+count is fixed in advance (``--steps``); no checkpoint is selected, so no test frame chooses
+anything. Peers on the same frames: ``cv2.phaseCorrelate`` between the same BEV pairs as the
+hand-set street model's (translation only; the turn from the gyro, as the street model's
+fusion mostly takes it), and a monocular essential-matrix VO (ORB features,
+``cv2.findEssentialMat`` with RANSAC, ``cv2.recoverPose``) whose unit steps get their length
+either from the truth at every frame (``oracle scale``) or from the first true step alone.
+
+Metrics, per run and per half (every model runs over the whole run from the true state at frame
+0; a half is scored on its own increments, composed from the true pose at its start):
+``motion_cm`` (RMSE of the per-frame planar step), ``distance_ratio`` (estimated path length
+over true), ``yaw_deg`` (RMSE of the per-frame turn), ``final_pct`` (final position error over
+the distance travelled), ``pitch_roll_max_deg`` and ``pitch_roll_rmse_deg`` (the attitude the
+BEVs were projected with against the levelled truth). Keys: ``runs[<run>][<variant>][<metric>]``
+with ``<run>`` one of ``06``, ``06 first half``, ``06 second half`` and likewise for 07.
+Figures: ``benchmarks/results/real_kitti_<run>.png``.
+
+    JBEVO_REFERENCE_DATA=../shared/data python benchmarks/real_kitti.py [--steps 40] [--seeds 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+from pathlib import Path
+
+import cv2
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from jbevo.data import sequence as sq
+from jbevo.data.kitti import read_run
+from jbevo.data.kitti_frames import body_from_camera_rotation
+from jbevo.files import write_json_atomic
+from jbevo.geometry.angles import wrap_angle
+from jbevo.geometry.se2 import se2_between, se2_compose
+from jbevo.inertial import calibration as cal
+from jbevo.inertial import kitti_imu
+from jbevo.inertial.kinematics import gyro_yaw_increment
+from jbevo.models import Bevo, motion_loss
+from jbevo.models.presets import STREET_GRID, street_model
+from jbevo.models.runners import run_bevo
+from jbevo.training.loop import make_step
+from jbevo.vision.bev import bev_increment
+
+RUNS = {"06": "kitti_odometry_06_first51", "07": "kitti_odometry_07_first160"}
+#: The 2011_09_30 drives with ground truth among the training sequences, less the scored ones.
+CALIBRATION_DRIVES = ("04", "05", "08")
+HALVES = ("first half", "second half")
+RESULTS = Path(__file__).parent / "results"
+
+
+# ------------------------------------------------------------------ data
+
+
+def load_runs(root: Path) -> dict[str, tuple[sq.Sequence, sq.Sequence]]:
+    """Each run as shipped and with its calibrated IMU and levelled truth."""
+    poses, imu = root / "kitti_odom" / "gt_poses", root / "kitti_odom" / "imu"
+    calibration = cal.calibrate([kitti_imu.calibration_drive(poses, imu, n) for n in CALIBRATION_DRIVES])
+    out = {}
+    for name, folder in RUNS.items():
+        raw = read_run(root / "realdata" / folder, imu=imu / f"{name}.mat")
+        drive = kitti_imu.calibrated_drive(poses, imu, name, calibration=calibration)
+        out[name] = (raw, kitti_imu.calibrated_sequence(raw, drive))
+    return out
+
+
+def half_frames(n: int, half: str) -> tuple[int, int]:
+    """Frames ``[start, stop)`` of a half (the middle frame belongs to both: each half's first
+    increment ends at its second frame)."""
+    mid = n // 2
+    return (0, mid + 1) if half == "first half" else (mid, n)
+
+
+# ------------------------------------------------------------------ metrics
+
+
+def scores(increments: np.ndarray, pitch_roll: np.ndarray | None, seq: sq.Sequence, start: int, stop: int) -> dict:
+    """The metrics of estimated ``increments`` (T, 3; row t from frame t - 1 to t) over frames
+    ``[start, stop)`` against ``seq``'s truth (its pitch and roll: the levelled truth's)."""
+    truth = np.asarray(seq.planar, float)
+    true_inc = np.asarray(se2_between(jnp.asarray(truth[:-1]), jnp.asarray(truth[1:])), float)[start : stop - 1]
+    est = np.asarray(increments, float)[start + 1 : stop]
+    err = est - true_inc
+    err[:, 2] = np.asarray(wrap_angle(err[:, 2]))
+    pose = truth[start]
+    for inc in est:
+        pose = np.asarray(se2_compose(jnp.asarray(pose), jnp.asarray(inc)), float)
+    distance = float(np.sum(np.linalg.norm(true_inc[:, :2], axis=1)))
+    out = {
+        "frames": stop - start,
+        "distance_m": distance,
+        "motion_cm": 100 * float(np.sqrt(np.mean(np.sum(err[:, :2] ** 2, 1)))),
+        "distance_ratio": float(np.sum(np.linalg.norm(est[:, :2], axis=1))) / distance,
+        "yaw_deg": float(np.degrees(np.sqrt(np.mean(err[:, 2] ** 2)))),
+        "final_pct": 100 * float(np.linalg.norm(pose[:2] - truth[stop - 1, :2])) / distance,
+    }
+    if pitch_roll is not None:
+        pr_err = np.degrees(np.asarray(pitch_roll, float)[start:stop] - np.asarray(seq.pitch_roll, float)[start:stop])
+        out["pitch_roll_max_deg"] = float(np.abs(pr_err).max())
+        out["pitch_roll_rmse_deg"] = float(np.sqrt(np.mean(pr_err**2)))
+    return out
+
+
+def segments(increments, pitch_roll, seq: sq.Sequence) -> dict[str, dict]:
+    """:func:`scores` over the whole run and over each half."""
+    n = seq.num_frames
+    out = {"whole": scores(increments, pitch_roll, seq, 0, n)}
+    for half in HALVES:
+        out[half] = scores(increments, pitch_roll, seq, *half_frames(n, half))
+    return out
+
+
+# ------------------------------------------------------------------ models
+
+
+def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, bool]]:
+    """The hand-set rows: label -> (model, on the calibrated IMU and levelled truth)."""
+    plain = Bevo.create(STREET_GRID, imu_dt)
+    banded = Bevo.create(STREET_GRID, imu_dt, bands=True)
+    street = street_model(imu_dt, bands=False)
+    return {
+        "BEVO, uncalibrated IMU": (plain, False),
+        "BEVO + bands, uncalibrated IMU": (banded, False),
+        "BEVO": (plain, True),
+        "BEVO + bands": (banded, True),
+        "BEVO, true attitude": (dataclasses.replace(plain, attitude_source="truth"), True),
+        "street": (street, True),
+        "street + robust bands": (street_model(imu_dt, bands=True), True),
+        "street, true attitude": (dataclasses.replace(street, attitude_source="truth"), True),
+        "street, zero attitude (no IMU)": (dataclasses.replace(street, attitude_source="zero"), True),
+    }
+
+
+#: Learned rows: label -> which leaves of the street model learn.
+LEARNED = {
+    "street, calibrated": lambda m: (m.road.pitch, m.road.roll, m.road.log_height_scale),
+    "street, learned": lambda m: (m.road, m.yaw_fusion, m.dpc),
+}
+
+
+def learnable_mask(model: Bevo, select) -> Bevo:
+    """A pytree of booleans like ``model``: True on the array leaves of ``select(model)``."""
+    mask = jax.tree_util.tree_map(lambda _: False, model)
+    chosen = select(model)
+    leaves = jax.tree_util.tree_leaves(eqx.filter(chosen, eqx.is_inexact_array))
+    return eqx.tree_at(select, mask, replace=jax.tree_util.tree_map(lambda _: True, chosen)) if leaves else mask
+
+
+def fit(model: Bevo, select, train: sq.Sequence, steps: int, seed: int, window: int, batch: int, lr: float) -> Bevo:
+    """Adam on the motion loss over random batches of ``window``-frame windows of ``train``
+    (each from the true state at its first frame), the leaves ``select`` picks only, for a fixed
+    number of ``steps``."""
+    params, static = eqx.partition(model, learnable_mask(model, select))
+    optimizer = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(lr))
+    step = make_step(static, optimizer, lambda m, b: jnp.mean(jax.vmap(lambda s: motion_loss(m(s, warm_start=True), s))(b)))
+    windows = sq.windows(train, window, 1)
+    rng = np.random.default_rng(seed)
+    opt_state = optimizer.init(params)
+    count = windows.frame_times.shape[0]
+    for _ in range(steps):
+        idx = rng.choice(count, size=min(batch, count), replace=False)
+        params, opt_state, loss = step(params, opt_state, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows))
+        if not np.isfinite(float(loss)):
+            raise RuntimeError("the training loss is not finite")
+    return eqx.combine(params, static)
+
+
+def learned_parameters(model: Bevo) -> dict:
+    """The street model's interpretable numbers."""
+    road, fusion = model.road, model.yaw_fusion
+    assert road is not None and fusion is not None
+    return {
+        "camera_pitch_deg": float(np.degrees(road.pitch)),
+        "camera_roll_deg": float(np.degrees(road.roll)),
+        "height_scale": float(jnp.exp(road.log_height_scale)),
+        "corridor_m": float(jnp.exp(road.log_corridor)),
+        "gyro_yaw_weight": float(fusion.gyro_weight),
+    }
+
+
+# ------------------------------------------------------------------ peers
+
+
+def phase_correlate_peer(model: Bevo, out, seq: sq.Sequence) -> np.ndarray:
+    """Increments from ``cv2.phaseCorrelate`` (with a Hanning window) between the BEVs ``model``
+    projected (at the attitude ``out`` reports), the turn from the gyro (bias-free after
+    calibration)."""
+    bev = jax.jit(jax.vmap(lambda image, pr: model.bev(image, pr, seq.camera)))
+    bevs = np.asarray(bev(seq.images, out.pitch_roll), np.float64)
+    window = cv2.createHanningWindow(bevs.shape[:0:-1], cv2.CV_64F)
+    incs = [np.zeros(3)]
+    for t in range(1, seq.num_frames):
+        (dx, dy), _ = cv2.phaseCorrelate(bevs[t - 1], bevs[t], window)
+        pr = np.asarray(out.pitch_roll[t])
+        turn = float(gyro_yaw_increment(seq.gyro[t], pr[0], pr[1], seq.imu_dt))
+        incs.append(np.asarray(bev_increment(model.grid, jnp.float32(-turn), jnp.array([dx, dy], jnp.float32))))
+    return np.stack(incs)
+
+
+def essential_matrix_vo(seq: sq.Sequence) -> np.ndarray:
+    """Unit-length planar steps ``(dx, dy, dyaw)`` (body frame) of a two-frame monocular VO:
+    ORB features, brute-force Hamming matching with the ratio test, the essential matrix with
+    RANSAC and ``recoverPose``; NaN where fewer than 8 matches survive."""
+    k = np.asarray(seq.camera.intrinsics, np.float64)
+    orb = cv2.ORB_create(3000)
+    matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+    images = np.asarray(seq.images)
+    features = [orb.detectAndCompute(image, None) for image in images]
+    steps = [np.zeros(3)]
+    for t in range(1, len(images)):
+        (kp0, d0), (kp1, d1) = features[t - 1], features[t]
+        pairs = [p for p in matcher.knnMatch(d0, d1, k=2) if len(p) == 2 and p[0].distance < 0.75 * p[1].distance]
+        if len(pairs) < 8:
+            steps.append(np.full(3, np.nan))
+            continue
+        p0 = np.float64([kp0[m[0].queryIdx].pt for m in pairs])
+        p1 = np.float64([kp1[m[0].trainIdx].pt for m in pairs])
+        e, inliers = cv2.findEssentialMat(p0, p1, k, method=cv2.RANSAC, prob=0.999, threshold=1.0)
+        _, r, tvec, _ = cv2.recoverPose(e, p0, p1, k, mask=inliers)
+        # x1 = R x0 + t: camera 1 in camera 0 is (R^T, -R^T t); into the body's axes.
+        rotation = body_from_camera_rotation(r.T) @ body_from_camera_rotation(np.eye(3)).T
+        position = body_from_camera_rotation(-r.T @ tvec.ravel())
+        steps.append(
+            np.array([*(position[:2] / max(np.linalg.norm(position[:2]), 1e-12)), np.arctan2(rotation[1, 0], rotation[0, 0])])
+        )
+    return np.stack(steps)
+
+
+def scaled_steps(unit: np.ndarray, seq: sq.Sequence, oracle: bool) -> np.ndarray:
+    """Unit steps scaled by the true step length of every frame (``oracle``) or of the first."""
+    truth = np.asarray(seq.planar, float)
+    lengths = np.r_[0.0, np.linalg.norm(np.diff(truth[:, :2], axis=0), axis=1)]
+    scale = lengths if oracle else np.r_[0.0, np.full(len(truth) - 1, lengths[1])]
+    out = unit.copy()
+    out[:, :2] *= scale[:, None]
+    return np.nan_to_num(out)
+
+
+# ------------------------------------------------------------------ figures
+
+
+def plot_run(path: Path, seq: sq.Sequence, trajectories: dict[str, np.ndarray]) -> None:
+    """Top view of the truth and ``trajectories`` (planar poses), legend below the axes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 6.5))
+    truth = np.asarray(seq.planar, float)
+    ax.plot(truth[:, 0], truth[:, 1], "k-", lw=2.5, label="ground truth")
+    for label, poses in trajectories.items():
+        ax.plot(poses[:, 0], poses[:, 1], lw=1.3, label=label)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8, frameon=False)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def poses_from(increments: np.ndarray, start: np.ndarray) -> np.ndarray:
+    poses = [np.asarray(start, float)]
+    for inc in np.asarray(increments, float)[1:]:
+        poses.append(np.asarray(se2_compose(jnp.asarray(poses[-1]), jnp.asarray(inc)), float))
+    return np.stack(poses)
+
+
+# ------------------------------------------------------------------ the benchmark
+
+
+def summarise(values: list[dict]) -> dict:
+    """Mean, standard deviation and the per-seed values of each metric."""
+    out = {}
+    for key in values[0]:
+        v = np.array([x[key] for x in values], float)
+        out[key] = float(v.mean())
+        out[f"{key}_std"] = float(v.std())
+        out[f"{key}_seeds"] = v.tolist()
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--steps", type=int, default=40, help="Adam steps per learned model (fixed in advance)")
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--window", type=int, default=8, help="frames per training window")
+    parser.add_argument("--batch", type=int, default=4, help="windows per step")
+    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--out", type=Path, default=RESULTS / "real_kitti.json")
+    args = parser.parse_args()
+    root = os.environ.get("JBEVO_REFERENCE_DATA")
+    if not root or not (Path(root) / "realdata").is_dir():
+        raise SystemExit("set JBEVO_REFERENCE_DATA to the reference data folder (with realdata/ and kitti_odom/)")
+    started = time.time()
+    runs = load_runs(Path(root))
+    table: dict[str, dict] = {}
+    learned_params: dict[str, dict] = {}
+
+    def put(run: str, variant: str, per_segment: dict[str, dict]) -> None:
+        for segment, metrics in per_segment.items():
+            key = run if segment == "whole" else f"{run} {segment}"
+            table.setdefault(key, {})[variant] = metrics
+
+    for name, (raw, seq) in runs.items():
+        print(f"run {name}: {seq.num_frames} frames", flush=True)
+        trajectories = {}
+        street_out = None
+        for label, (model, calibrated) in hand_set(seq.imu_dt).items():
+            data = seq if calibrated else raw
+            out = run_bevo(model, data, warm_start=True)
+            put(name, label, segments(out.increments, out.pitch_roll, seq))
+            if label == "street":
+                street_out = out
+            if label in ("BEVO + bands, uncalibrated IMU", "BEVO", "street", "street + robust bands"):
+                trajectories[label] = np.asarray(out.poses, float)
+            print(f"  {label}: {table[name][label]['final_pct']:.2f} % final", flush=True)
+        assert street_out is not None
+        street = street_model(seq.imu_dt, bands=False)
+        inc = phase_correlate_peer(street, street_out, seq)
+        put(name, "peer: cv2.phaseCorrelate on the street BEVs, turn from the gyro", segments(inc, None, seq))
+        unit = essential_matrix_vo(seq)
+        for oracle, label in (
+            (True, "peer: essential-matrix VO, oracle scale"),
+            (False, "peer: essential-matrix VO, first step's scale"),
+        ):
+            inc = scaled_steps(unit, seq, oracle)
+            put(name, label, segments(inc, None, seq))
+            if oracle:
+                trajectories[label] = poses_from(inc, np.asarray(seq.planar[0]))
+        n = seq.num_frames
+        for label, select in LEARNED.items():
+            for test_half, train_half in zip(HALVES, HALVES[::-1]):
+                start, stop = half_frames(n, train_half)
+                train = sq.window(seq, start, stop - start)
+                per_seed = []
+                for seed in range(args.seeds):
+                    model = fit(street, select, train, args.steps, seed, args.window, args.batch, args.lr)
+                    out = run_bevo(model, seq, warm_start=True)
+                    per_seed.append(scores(out.increments, out.pitch_roll, seq, *half_frames(n, test_half)))
+                    learned_params.setdefault(name, {}).setdefault(label, {}).setdefault(
+                        f"trained on the {train_half}", []
+                    ).append(learned_parameters(model))
+                put(name, label, {test_half: summarise(per_seed)})
+                print(
+                    f"  {label}, tested on the {test_half}: {table[f'{name} {test_half}'][label]['final_pct']:.2f} % final",
+                    flush=True,
+                )
+        plot_run(RESULTS / f"real_kitti_{name}.png", seq, trajectories)
+
+    write_json_atomic(
+        args.out,
+        {
+            "settings": {
+                **{k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+                "calibration_drives": list(CALIBRATION_DRIVES),
+            },
+            "runs": table,
+            "learned_parameters": learned_params,
+            "seconds": time.time() - started,
+            "device": jax.devices()[0].device_kind,
+        },
+    )
+    print(f"wrote {args.out} in {time.time() - started:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
