@@ -151,6 +151,8 @@ def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, bool]]:
         "BEVO, true attitude": (dataclasses.replace(plain, attitude_source="truth"), True),
         "street": (street, True),
         "street + robust bands": (street_model(imu_dt, bands=True), True),
+        "street + robust bands, from 0.5 m per frame": (street_model(imu_dt, bands=True, bands_min_travel=0.5), True),
+        "street + robust bands, at any speed": (street_model(imu_dt, bands=True, bands_min_travel=0.0), True),
         "street, true attitude": (dataclasses.replace(street, attitude_source="truth"), True),
         "street, zero attitude (no IMU)": (dataclasses.replace(street, attitude_source="zero"), True),
     }
@@ -171,23 +173,33 @@ def learnable_mask(model: Bevo, select) -> Bevo:
     return eqx.tree_at(select, mask, replace=jax.tree_util.tree_map(lambda _: True, chosen)) if leaves else mask
 
 
-def fit(model: Bevo, select, train: sq.Sequence, steps: int, seed: int, window: int, batch: int, lr: float) -> Bevo:
-    """Adam on the motion loss over random batches of ``window``-frame windows of ``train``
-    (each from the true state at its first frame), the leaves ``select`` picks only, for a fixed
-    number of ``steps``."""
-    params, static = eqx.partition(model, learnable_mask(model, select))
-    optimizer = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(lr))
-    step = make_step(static, optimizer, lambda m, b: jnp.mean(jax.vmap(lambda s: motion_loss(m(s, warm_start=True), s))(b)))
+class Trainer:
+    """Adam on the motion loss over random batches of windows (each from the true state at its
+    first frame), on the leaves ``select`` picks only; one compiled step for every fit."""
+
+    def __init__(self, model: Bevo, select, lr: float):
+        self.params, static = eqx.partition(model, learnable_mask(model, select))
+        self.optimizer = optax.chain(optax.clip_by_global_norm(1.0), optax.adam(lr))
+        self.step = make_step(
+            static, self.optimizer, lambda m, b: jnp.mean(jax.vmap(lambda s: motion_loss(m(s, warm_start=True), s))(b))
+        )
+        self.static = static
+
+
+def fit(trainer: Trainer, train: sq.Sequence, steps: int, seed: int, window: int, batch: int) -> Bevo:
+    """``steps`` steps (fixed in advance) of ``trainer`` from its starting parameters over
+    batches of ``batch`` random ``window``-frame windows of ``train``."""
+    params, step = trainer.params, trainer.step
     windows = sq.windows(train, window, 1)
     rng = np.random.default_rng(seed)
-    opt_state = optimizer.init(params)
+    opt_state = trainer.optimizer.init(params)
     count = windows.frame_times.shape[0]
     for _ in range(steps):
         idx = rng.choice(count, size=min(batch, count), replace=False)
         params, opt_state, loss = step(params, opt_state, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows))
         if not np.isfinite(float(loss)):
             raise RuntimeError("the training loss is not finite")
-    return eqx.combine(params, static)
+    return eqx.combine(params, trainer.static)
 
 
 def learned_parameters(model: Bevo) -> dict:
@@ -357,12 +369,13 @@ def main() -> None:
                 trajectories[label] = poses_from(inc, np.asarray(seq.planar[0]))
         n = seq.num_frames
         for label, select in LEARNED.items():
+            trainer = Trainer(street, select, args.lr)
             for test_half, train_half in zip(HALVES, HALVES[::-1]):
                 start, stop = half_frames(n, train_half)
                 train = sq.window(seq, start, stop - start)
                 per_seed = []
                 for seed in range(args.seeds):
-                    model = fit(street, select, train, args.steps, seed, args.window, args.batch, args.lr)
+                    model = fit(trainer, train, args.steps, seed, args.window, args.batch)
                     out = run_bevo(model, seq, warm_start=True)
                     per_seed.append(scores(out.increments, out.pitch_roll, seq, *half_frames(n, test_half)))
                     learned_params.setdefault(name, {}).setdefault(label, {}).setdefault(

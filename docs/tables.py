@@ -669,6 +669,83 @@ def reference_metrics() -> str:
     return table(["trajectory", "alignment", "t_err % (published)", "r_err deg/100 m (published)", "ATE m (published)"], rows)
 
 
+# ----------------------------------------------------------------------------- real frames
+
+REAL_KITTI = "benchmarks/results/real_kitti.json"
+REAL_KITTI_HEADLINE = [
+    "BEVO, uncalibrated IMU",
+    "BEVO + bands, uncalibrated IMU",
+    "BEVO",
+    "BEVO + bands",
+    "street",
+    "street + robust bands",
+    "street, calibrated",
+    "street, learned",
+    "street, true attitude",
+    "peer: cv2.phaseCorrelate on the street BEVs, turn from the gyro",
+    "peer: essential-matrix VO, oracle scale",
+]
+
+
+def _metric(metrics: dict | None, key: str, digits: int) -> str:
+    """A metric of one run (``num``) or over seeds (``spread``); ``-`` where absent."""
+    if metrics is None or key not in metrics:
+        return "-"
+    if f"{key}_seeds" in metrics:
+        return spread(metrics[f"{key}_seeds"], digits)
+    return num(metrics[key], digits)
+
+
+def real_kitti_headline() -> str:
+    runs = record(REAL_KITTI)["runs"]
+    keys = ["06", "06 second half", "07", "07 second half"]
+    rows = [[name] + [_metric(runs[k].get(name), "final_pct", 1) for k in keys] for name in REAL_KITTI_HEADLINE]
+    seeds = record(REAL_KITTI)["settings"]["seeds"]
+    header = [
+        f"final position error, % of distance (learned: {seeds} seeds)",
+        "06 (59 m)",
+        "06, 2nd half",
+        "07 (91 m)",
+        "07, 2nd half",
+    ]
+    return table(header, rows)
+
+
+def real_kitti(run: str) -> str:
+    d = record(REAL_KITTI)["runs"][run]
+    columns = [
+        ("motion_cm", "motion RMSE (cm)", 1),
+        ("distance_ratio", "distance ratio", 3),
+        ("yaw_deg", "yaw RMSE (deg/frame)", 3),
+        ("final_pct", "final error (%)", 2),
+        ("pitch_roll_max_deg", "pitch/roll max error (deg)", 2),
+    ]
+    rows = [[name] + [_metric(m, key, digits) for key, _, digits in columns] for name, m in d.items()]
+    first = next(iter(d.values()))
+    return table([f"{run}: {first['frames']} frames, {first['distance_m']:.1f} m"] + [c[1] for c in columns], rows)
+
+
+def real_kitti_learned() -> str:
+    d = record(REAL_KITTI)["learned_parameters"]
+    rows = []
+    for run, labels in d.items():
+        for label, halves in labels.items():
+            for half, per_seed in halves.items():
+                v = {k: [p[k] for p in per_seed] for k in per_seed[0]}
+                rows.append(
+                    [
+                        f"{run}, {label}, {half}",
+                        spread(v["camera_pitch_deg"], 3),
+                        spread(v["camera_roll_deg"], 3),
+                        spread(v["height_scale"], 3),
+                        spread(v["corridor_m"], 2),
+                        spread(v["gyro_yaw_weight"], 3),
+                    ]
+                )
+    header = ["learned on", "camera pitch (deg)", "camera roll (deg)", "height scale", "corridor (m)", "gyro's yaw weight"]
+    return table(header, rows)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
@@ -696,6 +773,12 @@ TABLES: dict[str, Callable[[], str]] = {
     "localization_validation": localization_validation,
     "localization_smoothing": localization_smoothing,
     "reference_metrics": reference_metrics,
+    "real_kitti_headline": real_kitti_headline,
+    "real_kitti_learned": real_kitti_learned,
+    **{
+        f"real_kitti_{run.replace(' ', '_')}": (lambda run=run: real_kitti(run))
+        for run in ("06", "06 first half", "06 second half", "07", "07 first half", "07 second half")
+    },
 }
 
 VALUES: dict[str, Callable[[], str]] = {

@@ -15,6 +15,7 @@ python benchmarks/simulator.py
 python benchmarks/bevo.py
 python benchmarks/attitude.py
 python benchmarks/attitude_real.py
+python benchmarks/real_kitti.py
 python experiments/filtering_demo.py
 python experiments/reference_metrics.py
 python experiments/bands.py

@@ -239,3 +239,21 @@ def test_bevo_plus_composes_an_odometry_with_bands(carla):
     assert np.asarray(out.accepted).any()
     plain = eqx.filter_jit(lambda mod, s, mp: mod(s, mp, warm_start=True))(model, seq, m)
     assert not np.allclose(np.asarray(out.odometry), np.asarray(plain.odometry))
+
+
+def test_map_matching_sees_the_camera_against_the_road(carla):
+    """With a road view on the odometry, the map match projects at the camera's attitude and
+    height against the road: the same as matching at the offset attitude with the scaled camera."""
+    from jbevo.vision.road_view import RoadView
+
+    seq, m = carla.sequence, carla.map
+    model = localization_model("carla")
+    view = RoadView.create(pitch=0.004, roll=-0.003, height_scale=1.03)
+    with_road = dataclasses.replace(model, odometry=dataclasses.replace(model.odometry, road=view))
+    pose, attitude = seq.planar[20], seq.pitch_roll[20]
+    got = jax.jit(lambda mod: mod.match(seq.images[20], attitude, seq.camera, m, pose))(with_road)
+    want = jax.jit(
+        lambda mod: mod.match(seq.images[20], attitude + jnp.array([0.004, -0.003]), view.camera(seq.camera), m, pose)
+    )(model)
+    np.testing.assert_allclose(got.fix, want.fix, atol=1e-5)
+    assert float(got.confidence) == pytest.approx(float(want.confidence), abs=1e-6)

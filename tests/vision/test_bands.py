@@ -154,6 +154,21 @@ def test_the_robust_update_keeps_its_pull_and_discounts_a_gross_slope(moving):
     assert float(m.variance) == pytest.approx(0.003**2 + float(m.value) ** 2, rel=1e-5)
 
 
+def test_below_min_travel_the_bands_stand_aside(moving):
+    """At 1 m per frame, bands engaged from 100 m per frame give exactly the motion of BEVO
+    without bands (the true attitude: no reprojection, no slope update), and from 0.5 m they
+    change it."""
+    plain = Bevo.create(GRID, attitude_source="truth")
+    run = eqx.filter_jit(lambda m, s: m(s, warm_start=True))
+    without = run(plain, moving).increments
+    idle = eqx.tree_at(lambda m: m.bands, plain, BandGeometry.create(min_travel=100.0), is_leaf=lambda x: x is None)
+    np.testing.assert_array_equal(run(idle, moving).increments, without)
+    engaged = eqx.tree_at(lambda m: m.bands, plain, BandGeometry.create(min_travel=0.5), is_leaf=lambda x: x is None)
+    assert float(jnp.max(jnp.abs(run(engaged, moving).increments - without))) > 1e-4
+    with pytest.raises(ValueError, match="min_travel"):
+        BandGeometry.create(min_travel=-1.0)
+
+
 def test_a_pitch_drift_at_standstill_reads_as_gyro_bias(standing):
     """Standing still, the previous BEV 0.2 deg above the current one: nothing moved, so the
     stretch can only be a pitch drift, which the model reads as a pitch-rate bias estimate

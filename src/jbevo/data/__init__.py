@@ -3,7 +3,7 @@ files, KITTI and TUM pose files, the KITTI readers and writers, and the data spl
 synthetic world lives in :mod:`jbevo.data.synthetic`, the datasets the commands offer in
 :mod:`jbevo.data.catalog`."""
 
-from jbevo.data.kitti import read_odometry, read_raw, write_odometry, write_raw
+from jbevo.data.kitti import read_odometry, read_raw, read_run, write_odometry, write_raw
 from jbevo.data.map import Map
 from jbevo.data.pose_files import Trajectory, match_frames, read_kitti, read_poses, read_tum, write_kitti, write_tum
 from jbevo.data.sequence import Sequence, check, stack, window, windows
@@ -23,6 +23,7 @@ __all__ = [
     "read_odometry",
     "read_poses",
     "read_raw",
+    "read_run",
     "read_tum",
     "save",
     "split_quarters",

@@ -13,14 +13,16 @@ from jbevo.models.bevo import Bevo, BevoOutput
 from jbevo.models.bevo_plus import BevoPlus, LocalizationOutput
 from jbevo.models.losses import localization_loss, motion_loss, planar_huber, relative_motion
 from jbevo.models.parameters import num_learnable
-from jbevo.models.presets import localization_model
+from jbevo.models.presets import localization_model, street_model
 from jbevo.models.runners import run_bevo, run_bevo_batch, run_bevo_plus, run_bevo_plus_batch
+from jbevo.models.yaw_fusion import YawFusion
 
 __all__ = [
     "Bevo",
     "BevoOutput",
     "BevoPlus",
     "LocalizationOutput",
+    "YawFusion",
     "localization_loss",
     "localization_model",
     "map_matching_alone",
@@ -32,4 +34,5 @@ __all__ = [
     "run_bevo_batch",
     "run_bevo_plus",
     "run_bevo_plus_batch",
+    "street_model",
 ]

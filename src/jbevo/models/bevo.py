@@ -274,14 +274,19 @@ class Bevo(eqx.Module):
         if self.bands is not None:
             height = self.camera_height(camera, bev.dtype)
             shifts = self.bands.shifts(carry.bev, bev, reg, self.grid, self.dpc)
+            engaged = moving
+            if self.bands.min_travel > 0:
+                engaged = moving & (bev_increment(self.grid, reg.rotation, reg.translation)[0] >= self.bands.min_travel)
             measured = belief
             if self.attitude_source == "filter":
                 slope = self.bands.slope_measurement(shifts, self.grid, self.dpc, height, frame_dt)
                 h = AttitudeState.row(pitch=slope.pitch, pitch_rate_bias=slope.pitch_rate_bias, dtype=belief.mean.dtype)
-                measured = self.attitude.update_linear(belief, h, slope.value, slope.variance, moving & slope.valid)
+                measured = self.attitude.update_linear(belief, h, slope.value, slope.variance, engaged & slope.valid)
             # The previous BEV's pitch relative to this one's, as the update estimates it.
             drift = ((belief.pitch_rate_bias - measured.pitch_rate_bias) * frame_dt).astype(bev.dtype)
-            rotation, translation = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift)
+            banded = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift)
+            rotation = jnp.where(engaged, banded[0], rotation)
+            translation = jnp.where(engaged, banded[1], translation)
             belief = measured
         if self.yaw_fusion is not None:
             rotation = self.yaw_fusion.fuse(rotation, gyro_turn.astype(rotation.dtype))

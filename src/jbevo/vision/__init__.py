@@ -1,5 +1,5 @@
 """Vision: the BEV projection of a camera image, differentiable phase correlation (DPC), the BEV
-band geometry, and matching a BEV against a top-down map.
+band geometry, the camera against the road (road view), and matching a BEV against a top-down map.
 
 Example::
 
@@ -15,6 +15,7 @@ from jbevo.vision.bev import bev_increment, bev_project, feather_to_mean, feathe
 from jbevo.vision.dpc_params import DPCParams
 from jbevo.vision.map_matching import MapMatch, map_crop, match_to_map
 from jbevo.vision.registration import Registration, register, register_translation
+from jbevo.vision.road_view import RoadView
 
 __all__ = [
     "BandGeometry",
@@ -22,6 +23,7 @@ __all__ = [
     "DPCParams",
     "MapMatch",
     "Registration",
+    "RoadView",
     "bev_increment",
     "bev_project",
     "feather_to_mean",

@@ -105,17 +105,27 @@ class BandGeometry(eqx.Module):
     attitude filter's other updates), so a slope that off-ground content or a near-standstill
     frame bends far from the prediction loses its weight instead of tilting the filter. Without
     it, a slow start on a real street (KITTI 07: 0.1-0.3 m per frame between parked cars) drove
-    the pitch 25 degrees off within 40 frames."""
+    the pitch 25 degrees off within 40 frames.
+
+    ``min_travel`` (static, metres per frame; 0: always on): below it (the full registration's
+    forward motion) :class:`jbevo.models.bevo.Bevo` neither updates the attitude with the slope
+    nor takes the bands' motion, but the full registration's. The slope's pitch coefficient
+    ``2 D / h`` vanishes with the travel ``D`` while its noise does not."""
 
     log_slope_std: Float[Array, ""]
     log_yaw_gain: Float[Array, ""]
     robust: bool = eqx.field(static=True, default=False)
+    min_travel: float = eqx.field(static=True, default=0.0)
 
     @classmethod
-    def create(cls, slope_std: float = 0.003, yaw_gain: float = 1.3, robust: bool = False) -> BandGeometry:
+    def create(
+        cls, slope_std: float = 0.003, yaw_gain: float = 1.3, robust: bool = False, min_travel: float = 0.0
+    ) -> BandGeometry:
         if not (slope_std > 0 and yaw_gain > 0):
             raise ValueError(f"slope_std and yaw_gain must be positive, got {slope_std}, {yaw_gain}")
-        return cls(jnp.log(jnp.float32(slope_std)), jnp.log(jnp.float32(yaw_gain)), bool(robust))
+        if not min_travel >= 0:
+            raise ValueError(f"min_travel must be non-negative, got {min_travel}")
+        return cls(jnp.log(jnp.float32(slope_std)), jnp.log(jnp.float32(yaw_gain)), bool(robust), float(min_travel))
 
     def shifts(
         self, prev: Float[Array, "h w"], bev: Float[Array, "h w"], reg: Registration, grid: BevGrid, params: DPCParams
