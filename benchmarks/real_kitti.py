@@ -13,11 +13,14 @@ Rows (``VARIANTS``; hand-set unless named otherwise). ``BEVO`` is the model as t
 experiments run it (:meth:`jbevo.models.Bevo.create`, the KITTI-size grid, filter attitude), with
 and without bands, on the uncalibrated and the calibrated IMU; ``street`` is
 :func:`jbevo.models.presets.street_model` (road view: camera against the road and road corridor;
-the gyro's turn fused with DPC's; robust bands where named) with the filter's, the true
-(levelled) or a zero attitude. Learned rows fit on one half of a run and are scored on the other
+the gyro's turn fused with DPC's; where named, robust bands engaged from 1 m per frame that
+measure the road's tilt) with the filter's, the true (levelled) or a zero attitude; the band
+rows also without the road tilt (the slope then corrects the pitch against gravity) and engaged
+from 0.5 m per frame or at any speed. Learned rows fit on one half of a run and are scored on the other
 (both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
 ``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
-``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11). The step
+``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11),
+``street + robust bands, learned`` those, the bands' two and the road tilt's walk (14). The step
 count is fixed in advance (``--steps``); no checkpoint is selected, so no test frame chooses
 anything. Peers on the same frames: ``cv2.phaseCorrelate`` between the same BEV pairs as the
 hand-set street model's (translation only; the turn from the gyro, as the street model's
@@ -53,12 +56,11 @@ import numpy as np
 import optax
 
 from jbevo.data import sequence as sq
-from jbevo.data.kitti import read_run
 from jbevo.data.kitti_frames import body_from_camera_rotation
+from jbevo.data.splits import KITTI_TRAIN
 from jbevo.files import write_json_atomic
 from jbevo.geometry.angles import wrap_angle
 from jbevo.geometry.se2 import se2_between, se2_compose
-from jbevo.inertial import calibration as cal
 from jbevo.inertial import kitti_imu
 from jbevo.inertial.kinematics import gyro_yaw_increment
 from jbevo.models import Bevo, motion_loss
@@ -68,8 +70,8 @@ from jbevo.training.loop import make_step
 from jbevo.vision.bev import bev_increment
 
 RUNS = {"06": "kitti_odometry_06_first51", "07": "kitti_odometry_07_first160"}
-#: The 2011_09_30 drives with ground truth among the training sequences, less the scored ones.
-CALIBRATION_DRIVES = ("04", "05", "08")
+#: The IMU's calibration: the recording day's training drives, less the scored ones (04, 05, 08).
+CALIBRATION_DAY = "2011_09_30"
 HALVES = ("first half", "second half")
 RESULTS = Path(__file__).parent / "results"
 
@@ -80,13 +82,11 @@ RESULTS = Path(__file__).parent / "results"
 def load_runs(root: Path) -> dict[str, tuple[sq.Sequence, sq.Sequence]]:
     """Each run as shipped and with its calibrated IMU and levelled truth."""
     poses, imu = root / "kitti_odom" / "gt_poses", root / "kitti_odom" / "imu"
-    calibration = cal.calibrate([kitti_imu.calibration_drive(poses, imu, n) for n in CALIBRATION_DRIVES])
-    out = {}
-    for name, folder in RUNS.items():
-        raw = read_run(root / "realdata" / folder, imu=imu / f"{name}.mat")
-        drive = kitti_imu.calibrated_drive(poses, imu, name, calibration=calibration)
-        out[name] = (raw, kitti_imu.calibrated_sequence(raw, drive))
-    return out
+    calibration = kitti_imu.day_calibration(str(poses), str(imu), CALIBRATION_DAY, exclude=tuple(RUNS))
+    return {
+        name: kitti_imu.read_calibrated_run(root / "realdata" / folder, poses, imu, name, calibration)
+        for name, folder in RUNS.items()
+    }
 
 
 def half_frames(n: int, half: str) -> tuple[int, int]:
@@ -151,17 +151,23 @@ def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, bool]]:
         "BEVO, true attitude": (dataclasses.replace(plain, attitude_source="truth"), True),
         "street": (street, True),
         "street + robust bands": (street_model(imu_dt, bands=True), True),
+        "street + robust bands, no road tilt": (dataclasses.replace(street_model(imu_dt, bands=True), road_tilt=None), True),
         "street + robust bands, from 0.5 m per frame": (street_model(imu_dt, bands=True, bands_min_travel=0.5), True),
         "street + robust bands, at any speed": (street_model(imu_dt, bands=True, bands_min_travel=0.0), True),
+        "street + robust bands, at any speed, no road tilt": (
+            dataclasses.replace(street_model(imu_dt, bands=True, bands_min_travel=0.0), road_tilt=None),
+            True,
+        ),
         "street, true attitude": (dataclasses.replace(street, attitude_source="truth"), True),
         "street, zero attitude (no IMU)": (dataclasses.replace(street, attitude_source="zero"), True),
     }
 
 
-#: Learned rows: label -> which leaves of the street model learn.
+#: Learned rows: label -> (whether the street model has its bands, which of its leaves learn).
 LEARNED = {
-    "street, calibrated": lambda m: (m.road.pitch, m.road.roll, m.road.log_height_scale),
-    "street, learned": lambda m: (m.road, m.yaw_fusion, m.dpc),
+    "street, calibrated": (False, lambda m: (m.road.pitch, m.road.roll, m.road.log_height_scale)),
+    "street, learned": (False, lambda m: (m.road, m.yaw_fusion, m.dpc)),
+    "street + robust bands, learned": (True, lambda m: (m.road, m.yaw_fusion, m.dpc, m.bands, m.road_tilt)),
 }
 
 
@@ -206,13 +212,16 @@ def learned_parameters(model: Bevo) -> dict:
     """The street model's interpretable numbers."""
     road, fusion = model.road, model.yaw_fusion
     assert road is not None and fusion is not None
-    return {
+    out = {
         "camera_pitch_deg": float(np.degrees(road.pitch)),
         "camera_roll_deg": float(np.degrees(road.roll)),
         "height_scale": float(jnp.exp(road.log_height_scale)),
         "corridor_m": float(jnp.exp(road.log_corridor)),
         "gyro_yaw_weight": float(fusion.gyro_weight),
     }
+    if model.road_tilt is not None:
+        out["road_tilt_walk_deg_per_sqrt_m"] = float(np.degrees(jnp.exp(model.road_tilt.log_walk_std)))
+    return out
 
 
 # ------------------------------------------------------------------ peers
@@ -368,8 +377,8 @@ def main() -> None:
             if oracle:
                 trajectories[label] = poses_from(inc, np.asarray(seq.planar[0]))
         n = seq.num_frames
-        for label, select in LEARNED.items():
-            trainer = Trainer(street, select, args.lr)
+        for label, (bands, select) in LEARNED.items():
+            trainer = Trainer(street_model(seq.imu_dt, bands=bands), select, args.lr)
             for test_half, train_half in zip(HALVES, HALVES[::-1]):
                 start, stop = half_frames(n, train_half)
                 train = sq.window(seq, start, stop - start)
@@ -393,7 +402,9 @@ def main() -> None:
         {
             "settings": {
                 **{k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
-                "calibration_drives": list(CALIBRATION_DRIVES),
+                "calibration_drives": [
+                    n for n in kitti_imu.RECORDING_DAYS[CALIBRATION_DAY] if n in KITTI_TRAIN and n not in RUNS
+                ],
             },
             "runs": table,
             "learned_parameters": learned_params,

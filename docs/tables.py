@@ -679,8 +679,10 @@ REAL_KITTI_HEADLINE = [
     "BEVO + bands",
     "street",
     "street + robust bands",
+    "street + robust bands, no road tilt",
     "street, calibrated",
     "street, learned",
+    "street + robust bands, learned",
     "street, true attitude",
     "peer: cv2.phaseCorrelate on the street BEVs, turn from the gyro",
     "peer: essential-matrix VO, oracle scale",
@@ -740,9 +742,18 @@ def real_kitti_learned() -> str:
                         spread(v["height_scale"], 3),
                         spread(v["corridor_m"], 2),
                         spread(v["gyro_yaw_weight"], 3),
+                        spread(v.get("road_tilt_walk_deg_per_sqrt_m", []), 4),
                     ]
                 )
-    header = ["learned on", "camera pitch (deg)", "camera roll (deg)", "height scale", "corridor (m)", "gyro's yaw weight"]
+    header = [
+        "learned on",
+        "camera pitch (deg)",
+        "camera roll (deg)",
+        "height scale",
+        "corridor (m)",
+        "gyro's yaw weight",
+        "road tilt walk (deg/√m)",
+    ]
     return table(header, rows)
 
 

@@ -98,12 +98,13 @@ def test_gradient_of_the_loss_matches_finite_differences(float64, world):
 
 
 def test_street_model_gradients_match_finite_differences(float64, world):
-    """The real-street configuration: road view, yaw fusion, robust bands (their 7 leaves, DPC's 6
-    and the band pair through them), float64 on the small camera; the attitude filter's leaves are
-    checked by the test above."""
+    """The real-street configuration: road view, yaw fusion, road tilt, robust bands (their 8
+    leaves, DPC's 6 and the band pair through them), float64 on the small camera; the attitude
+    filter's leaves are checked by the test above."""
     seq = procedural_sequence(3, 5, camera=CAMERA, world=world)
-    model = dataclasses.replace(street_model(seq.imu_dt, grid=GRID), gyro_window=0.0)
-    assert model.num_learnable() == 14 + 2 + 4 + 1
+    # The bands at any speed (the travel gate is a step: its kinks are not what this checks).
+    model = dataclasses.replace(street_model(seq.imu_dt, grid=GRID, bands_min_travel=0.0), gyro_window=0.0)
+    assert model.num_learnable() == 14 + 2 + 4 + 1 + 1
     assert model.bands is not None and model.bands.robust
     params, static = eqx.partition(model, eqx.is_inexact_array)
     params = jax.tree_util.tree_map(lambda x: x.astype(jnp.float64), params)  # steps of 1e-7 need it
@@ -118,7 +119,8 @@ def test_street_model_gradients_match_finite_differences(float64, world):
     # boundaries (kinks of bilinear sampling), and its corridor reweights every column: the
     # central difference settles only below 1e-6.
     road = jax.tree_util.tree_leaves(params.road)
-    assert check_leaf_gradients(value, grads, params, abs_tol=1e-7, skip=attitude + road) == 6 + 2 + 1
+    assert check_leaf_gradients(value, grads, params, abs_tol=1e-7, skip=attitude + road) == 6 + 2 + 1 + 1
     others = [x for x in jax.tree_util.tree_leaves(params) if all(x is not r for r in road)]
     assert check_leaf_gradients(value, grads, params, abs_tol=1e-7, eps=1e-7, skip=others) == 4
     assert abs(float(grads.road.pitch)) > 0 and abs(float(grads.yaw_fusion.log_std_ratio)) > 0
+    assert abs(float(grads.road_tilt.log_walk_std)) > 0

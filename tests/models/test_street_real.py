@@ -7,9 +7,7 @@ bands do. (The full table, with learned variants and peers: benchmarks/real_kitt
 import numpy as np
 import pytest
 
-from jbevo.data.kitti import read_run
 from jbevo.data.sequence import window
-from jbevo.inertial import calibration as cal
 from jbevo.inertial import kitti_imu
 from jbevo.models.bevo import Bevo
 from jbevo.models.losses import relative_motion
@@ -22,13 +20,11 @@ RUNS = {"06": "kitti_odometry_06_first51", "07": "kitti_odometry_07_first160"}
 @pytest.fixture(scope="module")
 def runs(reference_data):
     poses, imu = reference_data / "kitti_odom" / "gt_poses", reference_data / "kitti_odom" / "imu"
-    calibration = cal.calibrate([kitti_imu.calibration_drive(poses, imu, n) for n in ("04", "05", "08")])
-    out = {}
-    for name, folder in RUNS.items():
-        raw = read_run(reference_data / "realdata" / folder, imu=imu / f"{name}.mat")
-        drive = kitti_imu.calibrated_drive(poses, imu, name, calibration=calibration)
-        out[name] = (raw, kitti_imu.calibrated_sequence(raw, drive))
-    return out
+    calibration = kitti_imu.day_calibration(str(poses), str(imu), "2011_09_30", exclude=tuple(RUNS))
+    return {
+        name: kitti_imu.read_calibrated_run(reference_data / "realdata" / f, poses, imu, name, calibration)
+        for name, f in RUNS.items()
+    }
 
 
 def _final_pct_and_ratio(out, seq):

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo.data.imu_stream import resample_blocks
-from jbevo.data.kitti import read_kitti_imu
+from jbevo.data.kitti import read_kitti_imu, read_run
 from jbevo.data.kitti_frames import body_poses_from_kitti
 from jbevo.data.pose_files import read_kitti
 from jbevo.data.sequence import Sequence, check
@@ -69,10 +69,14 @@ def calibration_drive(poses_folder: str | Path, imu_folder: str | Path, name: st
 
 
 @functools.cache
-def day_calibration(poses_folder: str, imu_folder: str, day: str, groups: int = 0) -> cal.ImuCalibration:
-    """The calibration of ``day``'s IMU from its drives among 00-08 (cached per process;
-    ``groups`` for the jackknife, 0: none)."""
-    names = [n for n in RECORDING_DAYS[day] if n in KITTI_TRAIN]
+def day_calibration(
+    poses_folder: str, imu_folder: str, day: str, groups: int = 0, exclude: tuple[str, ...] = ()
+) -> cal.ImuCalibration:
+    """The calibration of ``day``'s IMU from its drives among 00-08 less ``exclude`` (cached per
+    process; ``groups`` for the jackknife, 0: none)."""
+    names = [n for n in RECORDING_DAYS[day] if n in KITTI_TRAIN and n not in exclude]
+    if not names:
+        raise ValueError(f"no training drive of {day} is left to calibrate on after excluding {exclude}")
     return cal.calibrate([calibration_drive(poses_folder, imu_folder, n) for n in names], groups=groups)
 
 
@@ -111,8 +115,21 @@ def calibrated_sequence(seq: Sequence, drive: CalibratedImuDrive) -> Sequence:
     return check(eqx.tree_at(lambda q: (q.frame_times, q.imu_times, q.gyro, q.accel, q.poses), seq, arrays))
 
 
+def read_calibrated_run(
+    run_folder: str | Path, poses_folder: str | Path, imu_folder: str | Path, name: str, calibration: cal.ImuCalibration
+) -> tuple[Sequence, Sequence]:
+    """A real run of sequence ``name`` kept in one folder (:func:`jbevo.data.kitti.read_run`)
+    with the sequence's IMU file from ``imu_folder``: as shipped, and with ``calibration``
+    applied and the truth levelled (:func:`calibrated_sequence`; the sequence's whole pose file
+    from ``poses_folder`` finds its gravity)."""
+    raw = read_run(run_folder, imu=Path(imu_folder) / f"{name}.mat")
+    drive = calibrated_drive(poses_folder, imu_folder, name, calibration=calibration)
+    return raw, calibrated_sequence(raw, drive)
+
+
 __all__ = [
     "calibrated_sequence",
+    "read_calibrated_run",
     "FRAME_STEP_S",
     "RECORDING_DAYS",
     "SAMPLES_PER_FRAME",

@@ -14,6 +14,7 @@ from jbevo.models.bevo_plus import BevoPlus, LocalizationOutput
 from jbevo.models.losses import localization_loss, motion_loss, planar_huber, relative_motion
 from jbevo.models.parameters import num_learnable
 from jbevo.models.presets import localization_model, street_model
+from jbevo.models.road_tilt import RoadTilt
 from jbevo.models.runners import run_bevo, run_bevo_batch, run_bevo_plus, run_bevo_plus_batch
 from jbevo.models.yaw_fusion import YawFusion
 
@@ -22,6 +23,7 @@ __all__ = [
     "BevoOutput",
     "BevoPlus",
     "LocalizationOutput",
+    "RoadTilt",
     "YawFusion",
     "localization_loss",
     "localization_model",

@@ -38,6 +38,13 @@ zero for frame 0), pitch, roll (the filter's prediction the BEV used), DPC confi
 planar pose. The learnable parameters are the attitude filter's Q (6) and R (2) (log standard
 deviations) and DPC's six: 14, plus the bands' two (the slope's noise and the yaw gain); the
 camera comes with each sequence (its calibration) and the BEV grid is static.
+
+For real streets (:func:`jbevo.models.presets.street_model`), three optional parts: the road
+view (:mod:`jbevo.vision.road_view`: the camera's pitch, roll and height against the road, and a
+road corridor that fades parked cars and facades; 4 learnable), the yaw fusion
+(:mod:`jbevo.models.yaw_fusion`: DPC's turn averaged with the gyro's; 1) and the road tilt
+(:mod:`jbevo.models.road_tilt`: with bands, the slope measures the road's grade, a state of its
+own added to the projection's pitch, instead of correcting the pitch against gravity; 1).
 """
 
 from __future__ import annotations
@@ -50,12 +57,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int, UInt8
 
 from jbevo.data.sequence import Sequence
+from jbevo.filtering.ukf import GaussianState
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.geometry.camera import Camera
 from jbevo.geometry.se2 import se2_compose
 from jbevo.inertial.kinematics import GRAVITY, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements, valid_mean
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 from jbevo.models.parameters import num_learnable
+from jbevo.models.road_tilt import RoadTilt
 from jbevo.models.yaw_fusion import YawFusion
 from jbevo.vision.bands import BandGeometry
 from jbevo.vision.bev import bev_increment, feathered_bev
@@ -82,13 +91,15 @@ class BevoCarry(NamedTuple):
     attitude: AttitudeState  #: the speed-aided attitude filter's belief
     bev: Float[Array, "h w"]  #: the previous frame's (feathered) BEV
     pose: Float[Array, " 3"]  #: the planar pose (x, y, yaw)
+    road_tilt: GaussianState  #: the road's tilt along the heading (level and unused without ``road_tilt``)
 
 
 class Observation(NamedTuple):
     """What one frame's odometry measured (:meth:`Bevo.observe`)."""
 
     attitude: AttitudeState  #: the belief after the frame's measurement updates
-    pitch_roll: Float[Array, " 2"]  #: the attitude the frame's BEV was projected with
+    road_tilt: GaussianState  #: the road's tilt after the frame's update
+    pitch_roll: Float[Array, " 2"]  #: the body's attitude the frame's BEV was projected with
     bev: Float[Array, "h w"]  #: that BEV
     increment: Float[Array, " 3"]  #: (dx, dy, dyaw) from the previous frame (body frame; 0 at frame 0)
     confidence: Float[Array, ""]  #: DPC's confidence (0 at frame 0)
@@ -127,6 +138,9 @@ class Bevo(eqx.Module):
             and the road corridor that fades the BEV's columns beside the lane (real streets).
         yaw_fusion: :class:`jbevo.models.yaw_fusion.YawFusion`, or None (off): the turn is DPC's
             rotation averaged with the gyro's yaw increment by inverse variance.
+        road_tilt: :class:`jbevo.models.road_tilt.RoadTilt`, or None (off): with bands and the
+            filter's attitude, the bands' slope updates the road's tilt (added to the pitch the
+            BEV is projected with) instead of the filter's pitch against gravity.
 
     Example::
 
@@ -146,6 +160,7 @@ class Bevo(eqx.Module):
     bands: BandGeometry | None = None
     road: RoadView | None = None
     yaw_fusion: YawFusion | None = None
+    road_tilt: RoadTilt | None = None
 
     @classmethod
     def create(
@@ -203,7 +218,8 @@ class Bevo(eqx.Module):
             lambda q: (q.gyro, q.accel, q.poses), seq, (seq.gyro.astype(dtype), seq.accel.astype(dtype), seq.poses.astype(dtype))
         )
         attitude = self.initial_attitude(seq, warm_start).astype(dtype)
-        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype))
+        tilt = (self.road_tilt or RoadTilt.create()).initial(dtype)
+        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype), tilt)
         frames = Frame(seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         return carry, frames, seq
 
@@ -261,12 +277,16 @@ class Bevo(eqx.Module):
         return register(prev, bev, self.dpc)
 
     def observe(self, carry: BevoCarry, frame: Frame, camera: Camera, frame_dt: float) -> Observation:
-        """One frame's odometry, top to bottom, on one attitude belief: the IMU prediction, the
-        BEV at the predicted attitude, DPC against the previous BEV, then the measurement
-        updates (the bands' pitch and pitch-rate bias, the odometry's speed, the lateral tilt)."""
+        """One frame's odometry, top to bottom, on one attitude belief: the IMU prediction (and
+        the road tilt's walk), the BEV at the predicted attitude, DPC against the previous BEV,
+        then the measurement updates (the bands' pitch and pitch-rate bias, or the road's tilt,
+        from the bands engaged at this frame's travel; the odometry's speed; the lateral tilt)."""
         belief = self.attitude.predict(carry.attitude, frame.gyro, frame.accel)
         pitch_roll = self.projection_attitude(belief, frame)
-        bev = self.bev(frame.image, pitch_roll, camera)
+        tilt = carry.road_tilt
+        if self.road_tilt is not None:
+            tilt = self.road_tilt.predict(tilt, belief.speed * frame_dt)
+        bev = self.bev(frame.image, self._on_road(pitch_roll, tilt), camera)
         gyro_turn = gyro_yaw_increment(frame.gyro - belief.gyro_bias, pitch_roll[0], pitch_roll[1], self.attitude.dt)
         reg = self._register(carry.bev, bev, gyro_turn)
         moving = frame.number > 0
@@ -280,8 +300,11 @@ class Bevo(eqx.Module):
             measured = belief
             if self.attitude_source == "filter":
                 slope = self.bands.slope_measurement(shifts, self.grid, self.dpc, height, frame_dt)
-                h = AttitudeState.row(pitch=slope.pitch, pitch_rate_bias=slope.pitch_rate_bias, dtype=belief.mean.dtype)
-                measured = self.attitude.update_linear(belief, h, slope.value, slope.variance, engaged & slope.valid)
+                if self.road_tilt is None:
+                    h = AttitudeState.row(pitch=slope.pitch, pitch_rate_bias=slope.pitch_rate_bias, dtype=belief.mean.dtype)
+                    measured = self.attitude.update_linear(belief, h, slope.value, slope.variance, engaged & slope.valid)
+                else:
+                    tilt = self.road_tilt.update(tilt, slope, engaged & slope.valid)
             # The previous BEV's pitch relative to this one's, as the update estimates it.
             drift = ((belief.pitch_rate_bias - measured.pitch_rate_bias) * frame_dt).astype(bev.dtype)
             banded = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift)
@@ -293,7 +316,13 @@ class Bevo(eqx.Module):
         increment = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
         belief = self.attitude.update_speed(belief, jnp.where(moving, increment[0] / frame_dt, jnp.nan))
         belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
-        return Observation(belief, pitch_roll, bev, increment, jnp.where(moving, reg.confidence, 0.0))
+        return Observation(belief, tilt, pitch_roll, bev, increment, jnp.where(moving, reg.confidence, 0.0))
+
+    def _on_road(self, pitch_roll: Float[Array, " 2"], tilt: GaussianState) -> Float[Array, " 2"]:
+        """The body's ``pitch_roll`` with the road's tilt added to the pitch (with ``road_tilt``)."""
+        if self.road_tilt is None:
+            return pitch_roll
+        return pitch_roll.at[0].add(tilt.mean[0].astype(pitch_roll.dtype))
 
     def advance(
         self,
@@ -312,8 +341,8 @@ class Bevo(eqx.Module):
         reproject = self.bands is not None if reproject is None else reproject
         bev = observation.bev
         if reproject and self.attitude_source == "filter":
-            bev = self.bev(frame.image, attitude.pitch_roll.astype(bev.dtype), camera)
-        new = BevoCarry(attitude, bev, se2_compose(carry.pose, observation.increment))
+            bev = self.bev(frame.image, self._on_road(attitude.pitch_roll.astype(bev.dtype), observation.road_tilt), camera)
+        new = BevoCarry(attitude, bev, se2_compose(carry.pose, observation.increment), observation.road_tilt)
         # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
         return jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), new, carry)
 

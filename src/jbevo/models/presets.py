@@ -10,6 +10,7 @@ from jbevo.data.synthetic.scenes import SCENE_KINDS
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.bevo_plus import BevoPlus
+from jbevo.models.road_tilt import RoadTilt
 from jbevo.vision.bands import BandGeometry
 
 #: BEVO+'s odometry searches DPC's rotation within this many radians of the gyro's turn.
@@ -43,10 +44,14 @@ def street_model(
     (:class:`jbevo.vision.road_view.RoadView`: camera against the road, road corridor), the gyro's
     turn fused with DPC's (:class:`jbevo.models.yaw_fusion.YawFusion`), DPC's rotation searched
     within :data:`STREET_GYRO_WINDOW` of the gyro's, and with ``bands`` the robust band update,
-    engaged from ``bands_min_travel`` metres per frame."""
+    engaged from ``bands_min_travel`` metres per frame, measuring the road's tilt
+    (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity."""
     model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True)
-    geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel) if bands else None
-    return dataclasses.replace(model, bands=geometry)
+    if not bands:
+        return model
+    return dataclasses.replace(
+        model, bands=BandGeometry.create(robust=True, min_travel=bands_min_travel), road_tilt=RoadTilt.create()
+    )
 
 
 __all__ = ["GYRO_WINDOW", "STREET_BANDS_MIN_TRAVEL", "STREET_GRID", "STREET_GYRO_WINDOW", "localization_model", "street_model"]

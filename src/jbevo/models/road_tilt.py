@@ -1,0 +1,73 @@
+"""The road's tilt as a state: the grade under the car, against gravity, along its heading.
+
+The attitude filter (:mod:`jbevo.inertial.speed_aided`) estimates the body's pitch against
+gravity: its speed state integrates ``f_x + g sin(pitch)``, which holds only for the pitch
+against gravity. The BEV, however, needs the camera's pitch against the road, and a street's
+grade changes under the car by tenths of a degree within tens of metres (on the real KITTI runs
+a constant camera-to-road pitch fitted on one half of a run misses the other half by that much:
+``benchmarks/real_kitti.py``). Correcting the gravity pitch with the bands' slope, which sees the
+road, makes the filter fight its own speed coupling.
+
+:class:`RoadTilt` keeps the two apart: a scalar Gaussian state ``d``, the road's tilt along the
+heading (radians, positive where the road falls away ahead, as a nose-down pitch), which the BEV's
+projection adds to the filter's pitch, and which only the bands' slope measures
+(:meth:`jbevo.vision.bands.BandGeometry.slope_measurement`: the slope is linear in the projection's
+pitch error with coefficient ``2 D / h``). Between frames it walks: its variance grows by
+``q^2 |D|`` over the ``D`` metres travelled (the grade changes with distance, not with time). The
+hand-set walk, ``q`` = 0.0025 rad per square-root metre, is a degree over about 50 m; learnable.
+
+Example::
+
+    >>> import jax.numpy as jnp
+    >>> tilt = RoadTilt.create()
+    >>> state = tilt.predict(tilt.initial(jnp.float32), jnp.float32(10.0))
+    >>> round(float(state.cov[0, 0]) ** 0.5, 4)
+    0.0118
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from jbevo.filtering import ukf
+from jbevo.vision.bands import SlopeMeasurement
+
+
+class RoadTilt(eqx.Module):
+    """The road tilt's random walk (learnable) and its prior (static).
+
+    Attributes:
+        log_walk_std: log of ``q``, radians per square-root metre travelled.
+        initial_std: the prior's standard deviation (radians; static, hand-set 0.5 deg).
+    """
+
+    log_walk_std: Float[Array, ""]
+    initial_std: float = eqx.field(static=True, default=0.0087)
+
+    @classmethod
+    def create(cls, walk_std: float = 0.0025, initial_std: float = 0.0087) -> RoadTilt:
+        if not (walk_std > 0 and initial_std > 0):
+            raise ValueError(f"walk_std and initial_std must be positive, got {walk_std}, {initial_std}")
+        return cls(jnp.log(jnp.float32(walk_std)), float(initial_std))
+
+    def initial(self, dtype) -> ukf.GaussianState:
+        """A level road, ``initial_std`` uncertain."""
+        return ukf.GaussianState(jnp.zeros(1, dtype), jnp.full((1, 1), self.initial_std**2, dtype))
+
+    def predict(self, state: ukf.GaussianState, travel: Float[Array, ""]) -> ukf.GaussianState:
+        """The walk over ``travel`` metres."""
+        grow = (jnp.exp(2.0 * self.log_walk_std) * jnp.abs(travel)).astype(state.cov.dtype)
+        return ukf.GaussianState(state.mean, state.cov + grow)
+
+    @staticmethod
+    def update(state: ukf.GaussianState, slope: SlopeMeasurement, use: Bool[Array, ""] | bool = True) -> ukf.GaussianState:
+        """Condition on the bands' slope (its ``pitch`` coefficient, value and variance), the
+        only measurement of the road's tilt; unchanged where ``use`` is False."""
+        dtype = state.mean.dtype
+        h = jnp.reshape(slope.pitch, (1,)).astype(dtype)
+        return ukf.linear_update(state, h, slope.value.astype(dtype), slope.variance.astype(dtype), use)
+
+
+__all__ = ["RoadTilt"]
