@@ -172,12 +172,13 @@ class Bevo(eqx.Module):
         bands: bool = False,
         road: bool = False,
         yaw_fusion: bool = False,
+        road_tilt: bool = False,
         **dpc_kwargs,
     ) -> Bevo:
         """Hand-set defaults: :meth:`SpeedAidedAttitude.create`, DPC's defaults with 256
         angles, a 128 x 128 BEV at 0.1 m from 7.5 m ahead, with ``bands``
-        :meth:`BandGeometry.create`, with ``road`` :meth:`RoadView.create` and with ``yaw_fusion``
-        :meth:`YawFusion.create`."""
+        :meth:`BandGeometry.create`, with ``road`` :meth:`RoadView.create`, with ``yaw_fusion``
+        :meth:`YawFusion.create` and with ``road_tilt`` :meth:`RoadTilt.create`."""
         if attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source must be one of {ATTITUDE_SOURCES}, got {attitude_source!r}")
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
@@ -192,6 +193,7 @@ class Bevo(eqx.Module):
             BandGeometry.create() if bands else None,
             RoadView.create() if road else None,
             YawFusion.create() if yaw_fusion else None,
+            RoadTilt.create() if road_tilt else None,
         )
 
     def num_learnable(self) -> int:

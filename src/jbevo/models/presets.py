@@ -10,7 +10,6 @@ from jbevo.data.synthetic.scenes import SCENE_KINDS
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.bevo_plus import BevoPlus
-from jbevo.models.road_tilt import RoadTilt
 from jbevo.vision.bands import BandGeometry
 
 #: BEVO+'s odometry searches DPC's rotation within this many radians of the gyro's turn.
@@ -46,12 +45,9 @@ def street_model(
     within :data:`STREET_GYRO_WINDOW` of the gyro's, and with ``bands`` the robust band update,
     engaged from ``bands_min_travel`` metres per frame, measuring the road's tilt
     (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity."""
-    model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True)
-    if not bands:
-        return model
-    return dataclasses.replace(
-        model, bands=BandGeometry.create(robust=True, min_travel=bands_min_travel), road_tilt=RoadTilt.create()
-    )
+    model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True, road_tilt=bands)
+    geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel) if bands else None
+    return dataclasses.replace(model, bands=geometry)
 
 
 __all__ = ["GYRO_WINDOW", "STREET_BANDS_MIN_TRAVEL", "STREET_GRID", "STREET_GYRO_WINDOW", "localization_model", "street_model"]

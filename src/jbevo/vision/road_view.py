@@ -52,7 +52,8 @@ class RoadView(eqx.Module):
         roll: radians added to the projection's roll.
         log_height_scale: log of the factor on the camera's nominal height.
         log_corridor: log of the corridor's half width (metres, across the BEV's columns).
-        corridor_edge: metres over which the corridor's weight falls from 0.73 to 0.27 (static).
+        corridor_edge: the logistic ramp's scale in metres: the weight is 0.73 this far inside the
+            corridor's edge and 0.27 this far outside (static).
     """
 
     pitch: Float[Array, ""]
