@@ -58,12 +58,13 @@ import optax
 from jbevo.data import sequence as sq
 from jbevo.data.kitti_frames import body_from_camera_rotation
 from jbevo.data.splits import KITTI_TRAIN
+from jbevo.eval.plots import trajectory_top_view
 from jbevo.files import write_json_atomic
 from jbevo.geometry.angles import wrap_angle
-from jbevo.geometry.se2 import se2_between, se2_compose
+from jbevo.geometry.se2 import se2_compose
 from jbevo.inertial import kitti_imu
 from jbevo.inertial.kinematics import gyro_yaw_increment
-from jbevo.models import Bevo, motion_loss
+from jbevo.models import Bevo, motion_loss, relative_motion
 from jbevo.models.presets import STREET_GRID, street_model
 from jbevo.models.runners import run_bevo
 from jbevo.training.loop import make_step
@@ -99,17 +100,23 @@ def half_frames(n: int, half: str) -> tuple[int, int]:
 # ------------------------------------------------------------------ metrics
 
 
+def compose(start: np.ndarray, increments: np.ndarray) -> np.ndarray:
+    """The planar poses ``start`` and after each of ``increments`` (body frame of the pose before)."""
+    poses = [np.asarray(start, float)]
+    for inc in np.asarray(increments, float):
+        poses.append(np.asarray(se2_compose(jnp.asarray(poses[-1]), jnp.asarray(inc)), float))
+    return np.stack(poses)
+
+
 def scores(increments: np.ndarray, pitch_roll: np.ndarray | None, seq: sq.Sequence, start: int, stop: int) -> dict:
     """The metrics of estimated ``increments`` (T, 3; row t from frame t - 1 to t) over frames
     ``[start, stop)`` against ``seq``'s truth (its pitch and roll: the levelled truth's)."""
     truth = np.asarray(seq.planar, float)
-    true_inc = np.asarray(se2_between(jnp.asarray(truth[:-1]), jnp.asarray(truth[1:])), float)[start : stop - 1]
+    true_inc = np.asarray(relative_motion(seq), float)[start + 1 : stop]
     est = np.asarray(increments, float)[start + 1 : stop]
     err = est - true_inc
     err[:, 2] = np.asarray(wrap_angle(err[:, 2]))
-    pose = truth[start]
-    for inc in est:
-        pose = np.asarray(se2_compose(jnp.asarray(pose), jnp.asarray(inc)), float)
+    pose = compose(truth[start], est)[-1]
     distance = float(np.sum(np.linalg.norm(true_inc[:, :2], axis=1)))
     out = {
         "frames": stop - start,
@@ -282,38 +289,6 @@ def scaled_steps(unit: np.ndarray, seq: sq.Sequence, oracle: bool) -> np.ndarray
     return np.nan_to_num(out)
 
 
-# ------------------------------------------------------------------ figures
-
-
-def plot_run(path: Path, seq: sq.Sequence, trajectories: dict[str, np.ndarray]) -> None:
-    """Top view of the truth and ``trajectories`` (planar poses), legend below the axes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(7.5, 6.5))
-    truth = np.asarray(seq.planar, float)
-    ax.plot(truth[:, 0], truth[:, 1], "k-", lw=2.5, label="ground truth")
-    for label, poses in trajectories.items():
-        ax.plot(poses[:, 0], poses[:, 1], lw=1.3, label=label)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.grid(alpha=0.3)
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8, frameon=False)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def poses_from(increments: np.ndarray, start: np.ndarray) -> np.ndarray:
-    poses = [np.asarray(start, float)]
-    for inc in np.asarray(increments, float)[1:]:
-        poses.append(np.asarray(se2_compose(jnp.asarray(poses[-1]), jnp.asarray(inc)), float))
-    return np.stack(poses)
-
-
 # ------------------------------------------------------------------ the benchmark
 
 
@@ -375,7 +350,7 @@ def main() -> None:
             inc = scaled_steps(unit, seq, oracle)
             put(name, label, segments(inc, None, seq))
             if oracle:
-                trajectories[label] = poses_from(inc, np.asarray(seq.planar[0]))
+                trajectories[label] = compose(np.asarray(seq.planar[0]), inc[1:])
         n = seq.num_frames
         for label, (bands, select) in LEARNED.items():
             trainer = Trainer(street_model(seq.imu_dt, bands=bands), select, args.lr)
@@ -395,7 +370,7 @@ def main() -> None:
                     f"  {label}, tested on the {test_half}: {table[f'{name} {test_half}'][label]['final_pct']:.2f} % final",
                     flush=True,
                 )
-        plot_run(RESULTS / f"real_kitti_{name}.png", seq, trajectories)
+        trajectory_top_view(RESULTS / f"real_kitti_{name}.png", seq.planar, trajectories, legend_below=True)
 
     write_json_atomic(
         args.out,

@@ -674,16 +674,10 @@ def reference_metrics() -> str:
 REAL_KITTI = "benchmarks/results/real_kitti.json"
 REAL_KITTI_HEADLINE = [
     "BEVO, uncalibrated IMU",
-    "BEVO + bands, uncalibrated IMU",
-    "BEVO",
     "BEVO + bands",
     "street",
     "street + robust bands",
-    "street + robust bands, no road tilt",
-    "street, calibrated",
-    "street, learned",
     "street + robust bands, learned",
-    "street, true attitude",
     "peer: cv2.phaseCorrelate on the street BEVs, turn from the gyro",
     "peer: essential-matrix VO, oracle scale",
 ]

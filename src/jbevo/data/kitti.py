@@ -147,10 +147,7 @@ def read_odometry(
         raise FileNotFoundError(f"missing sequence folder {folder}")
     images = _images(folder / "image_0")
     times = np.concatenate(_numbers(folder / "times.txt", 1))
-    calib = _calibration_rows(folder / "calib.txt") if (folder / "calib.txt").is_file() else {}
-    if calib.get("P0", np.array([])).size != 12:
-        raise ValueError(f"{folder / 'calib.txt'} is missing or has no P0 line")
-    p0 = calib["P0"].reshape(3, 4)
+    p0 = _p0(folder / "calib.txt")
     n = len(images)
     if len(times) != n:
         raise ValueError(f"{folder}: {n} images but {len(times)} times")
@@ -158,6 +155,14 @@ def read_odometry(
     poses = _body_poses(pose_file, n) if pose_file.is_file() else np.full((n, 4, 4), np.nan)
     blocks = _imu_blocks(None if imu is None else _imu_file(imu, sequence), times)
     return _sequence(images, times, *blocks, _camera(p0, images.shape[1:], camera_height), poses)
+
+
+def _p0(calib_file: Path) -> np.ndarray:
+    """The ``P0`` projection ``(3, 4)`` of a KITTI odometry ``calib.txt``."""
+    calib = _calibration_rows(calib_file) if calib_file.is_file() else {}
+    if calib.get("P0", np.array([])).size != 12:
+        raise ValueError(f"{calib_file} is missing or has no P0 line")
+    return calib["P0"].reshape(3, 4)
 
 
 def _body_poses(pose_file: Path, n: int) -> np.ndarray:
@@ -194,11 +199,8 @@ def read_run(folder: str | Path, imu: str | Path | None = None, camera_height: f
     if len(times) < n:
         raise ValueError(f"{folder / 'times.txt'}: {len(times)} times for {n} images")
     times = times[:n]
-    calib = _calibration_rows(folder / "calib.txt")
-    if calib.get("P0", np.array([])).size != 12:
-        raise ValueError(f"{folder / 'calib.txt'} has no P0 line (12 numbers)")
     poses = _body_poses(folder / "poses.txt", n)
-    camera = _camera(calib["P0"].reshape(3, 4), images.shape[1:], camera_height)
+    camera = _camera(_p0(folder / "calib.txt"), images.shape[1:], camera_height)
     return _sequence(images, times, *_imu_blocks(imu, times), camera, poses)
 
 

@@ -52,9 +52,11 @@ def trajectory_top_view(
     estimates: Mapping[str, object],
     plane: tuple[int, int] = (0, 1),
     title: str | None = None,
+    legend_below: bool = False,
 ):
     """Top view of ``gt`` and each named estimate on the axes ``plane`` (``(0, 2)``: KITTI camera
-    x and z; ``(0, 1)``: a z-up world or planar trajectories). The start is marked."""
+    x and z; ``(0, 1)``: a z-up world or planar trajectories). The start is marked. With
+    ``legend_below`` the legend sits under the axes, clear of every curve."""
     fig, (ax,) = _figure((6, 6))
     g = _positions(gt)
     ax.plot(g[:, plane[0]], g[:, plane[1]], "k-", lw=2, label="ground truth")
@@ -66,7 +68,10 @@ def trajectory_top_view(
     ax.set_ylabel(f"{_AXIS[plane[1]]} [m]")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
-    ax.legend()
+    if legend_below:
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8, frameon=False)
+    else:
+        ax.legend()
     if title:
         ax.set_title(title)
     return _save(fig, path)

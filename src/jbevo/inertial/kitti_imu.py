@@ -101,17 +101,22 @@ def calibrated_sequence(seq: Sequence, drive: CalibratedImuDrive) -> Sequence:
     n = seq.num_frames
     if len(drive.frame_times) < n:
         raise ValueError(f"the calibrated drive has {len(drive.frame_times)} frames, the sequence {n}")
-    first = np.asarray(seq.poses[0], float)
-    if np.all(np.isfinite(first)):
+    positions = np.asarray(seq.poses[:2, :3, 3], float)
+    if n > 1 and np.all(np.isfinite(positions)):
         # The drive's truth must be this sequence's: the same motion from frame 0 to frame 1.
-        step = np.linalg.norm(np.asarray(seq.poses[1, :3, 3], float) - first[:3, 3]) if n > 1 else 0.0
-        drive_step = np.linalg.norm(drive.body_poses[1, :3, 3] - drive.body_poses[0, :3, 3]) if n > 1 else 0.0
+        step = np.linalg.norm(positions[1] - positions[0])
+        drive_step = np.linalg.norm(drive.body_poses[1, :3, 3] - drive.body_poses[0, :3, 3])
         if abs(step - drive_step) > 1e-3:
             raise ValueError(
                 f"the calibrated drive's first step is {drive_step:.4f} m, the sequence's {step:.4f} m: not the same drive"
             )
-    replace = (drive.frame_times[:n], drive.imu_times[:n], drive.gyro[:n], drive.accel[:n], drive.body_poses[:n])
-    arrays = tuple(jnp.asarray(a, jnp.float32 if i == 4 else None) for i, a in enumerate(replace))
+    arrays = (
+        jnp.asarray(drive.frame_times[:n]),
+        jnp.asarray(drive.imu_times[:n]),
+        jnp.asarray(drive.gyro[:n]),
+        jnp.asarray(drive.accel[:n]),
+        jnp.asarray(drive.body_poses[:n], jnp.float32),
+    )
     return check(eqx.tree_at(lambda q: (q.frame_times, q.imu_times, q.gyro, q.accel, q.poses), seq, arrays))
 
 
@@ -128,14 +133,14 @@ def read_calibrated_run(
 
 
 __all__ = [
-    "calibrated_sequence",
-    "read_calibrated_run",
     "FRAME_STEP_S",
     "RECORDING_DAYS",
     "SAMPLES_PER_FRAME",
     "CalibratedImuDrive",
     "calibrated_drive",
+    "calibrated_sequence",
     "calibration_drive",
     "day_calibration",
+    "read_calibrated_run",
     "recording_day",
 ]
