@@ -32,3 +32,36 @@ def check_leaf_gradients(value, grads, params, abs_tol: float, rel_tol: float = 
             )
             checked += 1
     return checked
+
+
+def run_processes(module: str, argv: list[str], count: int = 2) -> list:
+    """``python -m module argv`` as ``count`` processes of one job on localhost (CPU, one device
+    each, a free port for the coordinator); their ``CompletedProcess`` results, each checked to
+    have succeeded."""
+    import os
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        port = s.getsockname()[1]
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"} | {"JAX_PLATFORMS": "cpu"}
+    job = ["--coordinator", f"localhost:{port}", "--num-processes", str(count)]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", module, *argv, *job, "--process-id", str(i)],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(count)
+    ]
+    results = []
+    for p in procs:
+        out, err = p.communicate(timeout=900)
+        results.append(subprocess.CompletedProcess(p.args, p.returncode, out, err))
+    for r in results:
+        assert r.returncode == 0, r.stderr[-3000:]
+    return results

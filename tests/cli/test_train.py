@@ -1,15 +1,23 @@
 """python -m jbevo.train and python -m jbevo.evaluate on a tiny built-in dataset: metrics before
 and after, checkpoints, --resume, and the evaluation's pose files, plots and metrics (also
-sharded over four CPU devices)."""
+sharded over four CPU devices); both as two processes of one job (jax.distributed over gloo on
+localhost), equal to the one-process run to round-off."""
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 
+import equinox as eqx
+import jax
+import numpy as np
 import pytest
 
 from jbevo.cli import evaluate, train
+from jbevo.models.bevo import Bevo
+from jbevo.training import checkpoint
+from tests.helpers import run_processes
 
 TINY = [
     "--sequences",
@@ -35,6 +43,18 @@ TINY = [
 def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
     assert train.main([*TINY, "--epochs", "1", "--out", str(out)]) == 0
+    shutil.copy(out / "last.ckpt", out / "epoch1.ckpt")  # --resume below trains on
+    shutil.copy(out / "metrics.json", out / "epoch1.json")
+    return out
+
+
+EVALUATE = ["--sequences", "3", "--frames", "16", "--grid", "0.1", "64", "7.5"]
+
+
+@pytest.fixture(scope="module")
+def evaluation(run_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("eval")
+    assert evaluate.main(["--checkpoint", str(run_dir / "epoch1.ckpt"), *EVALUATE, "--out", str(out)]) == 0
     return out
 
 
@@ -78,15 +98,40 @@ def test_resume_from_a_corrupt_checkpoint_fails_clearly(tmp_path, capsys):
     assert "last.ckpt is not a readable jbevo checkpoint" in err and "Traceback" not in err
 
 
-def test_evaluate_writes_poses_plots_and_metrics(run_dir, tmp_path):
-    out = tmp_path / "eval"
-    args = ["--sequences", "2", "--frames", "16", "--grid", "0.1", "64", "7.5", "--out", str(out)]
-    assert evaluate.main(["--checkpoint", str(run_dir), *args]) == 0
-    metrics = json.loads((out / "metrics.json").read_text())
-    assert set(metrics["per_sequence"]) == {"synthetic_1000", "synthetic_1001"}
-    assert metrics["overall"]["frames_per_s"] > 0
-    assert (out / "poses" / "synthetic_1000.txt").read_text().count("\n") == 16
-    assert (out / "plots" / "synthetic_1001.png").stat().st_size > 1000
+def test_evaluate_writes_poses_plots_and_metrics(evaluation):
+    metrics = json.loads((evaluation / "metrics.json").read_text())
+    assert list(metrics["per_sequence"]) == ["synthetic_1000", "synthetic_1001", "synthetic_1002"]
+    assert metrics["overall"]["frames_per_s"] > 0 and metrics["processes"] == 1
+    assert (evaluation / "poses" / "synthetic_1000.txt").read_text().count("\n") == 16
+    assert (evaluation / "plots" / "synthetic_1001.png").stat().st_size > 1000
+
+
+def test_two_processes_train_as_one(run_dir, tmp_path):
+    out = tmp_path / "two"
+    results = run_processes("jbevo.train", [*TINY, "--epochs", "1", "--out", str(out)])
+    # Process 0 reports; the other prints nothing of its own (gloo may say it connected).
+    assert "validation after training" in results[0].stdout and "validation" not in results[1].stdout
+    one, two = (json.loads(path.read_text()) for path in (run_dir / "epoch1.json", out / "metrics.json"))
+    assert (one["processes"], one["devices"], two["processes"], two["devices"]) == (1, 1, 2, 2)
+    assert two["history"][0]["loss"] == pytest.approx(one["history"][0]["loss"], rel=1e-5)
+    models = [checkpoint.load_model(path, Bevo) for path in (run_dir / "epoch1.ckpt", out / "last.ckpt")]
+    hand_set = Bevo.create(models[0].grid, 0.01)
+    leaves = [jax.tree_util.tree_leaves(eqx.filter(m, eqx.is_inexact_array)) for m in (*models, hand_set)]
+    assert not all(np.allclose(x, y) for x, y in zip(leaves[0], leaves[2], strict=True))  # it trained
+    for x, y in zip(leaves[1], leaves[0], strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-4, atol=1e-6)
+
+
+def test_two_processes_evaluate_as_one(run_dir, evaluation, tmp_path):
+    out = tmp_path / "two"
+    run_processes("jbevo.evaluate", ["--checkpoint", str(run_dir / "epoch1.ckpt"), *EVALUATE, "--out", str(out)])
+    one, two = (json.loads((d / "metrics.json").read_text()) for d in (evaluation, out))
+    assert two["processes"] == 2 and list(two["per_sequence"]) == list(one["per_sequence"])  # all, in order
+    for name in one["per_sequence"]:
+        assert two["per_sequence"][name]["ate_m"] == pytest.approx(one["per_sequence"][name]["ate_m"], rel=1e-4)
+        poses = [np.loadtxt(d / "poses" / f"{name}.txt") for d in (evaluation, out)]
+        np.testing.assert_allclose(poses[1], poses[0], atol=1e-4)
+    assert two["overall"]["ate_m"] == pytest.approx(one["overall"]["ate_m"], rel=1e-4)
 
 
 def test_evaluate_shards_over_four_cpu_devices(tmp_path):

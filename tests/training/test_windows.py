@@ -1,5 +1,7 @@
-"""Training windows: windows cut from the sequences, or the whole sequences batched."""
+"""Training windows: windows cut from the sequences (sliced on demand, not copied), or the whole
+sequences batched."""
 
+import numpy as np
 import pytest
 
 from jbevo.data.synthetic import World, procedural_sequence
@@ -16,15 +18,31 @@ def seqs():
 
 
 def test_windows_of_every_long_enough_sequence(seqs):
-    batch = training_windows(seqs, 8)  # stride 4: 2 + 2 windows of the 12-frame drives, 1 of the 9
-    assert batch.images.shape[:2] == (5, 8)
+    windows = training_windows(seqs, 8)  # stride 4: 2 + 2 windows of the 12-frame drives, 1 of the 9
+    assert len(windows) == 5 and windows.all().images.shape[:2] == (5, 8)
+    assert windows.drive_index.tolist() == [0, 0, 1, 1, 2] and windows.starts.tolist() == [0, 4, 0, 4, 0]
     with pytest.raises(ValueError, match="no sequence has 20 frames"):
         training_windows(seqs, 20)
 
 
+def test_a_batch_holds_the_frames_of_its_windows_and_the_drives_are_not_copied(seqs):
+    windows = training_windows(seqs, 8, stride=2)
+    batch = windows.batch([4, 0])  # drive 1 from frame 2 (windows 0-2 start at 0, 2, 4 of drive 0), drive 0 from 0
+    np.testing.assert_array_equal(batch.images[0], np.asarray(seqs[1].images[2:10]))
+    np.testing.assert_array_equal(batch.gyro[1], np.asarray(seqs[0].gyro[:8]))
+    np.testing.assert_array_equal(batch.poses[0], np.asarray(seqs[1].poses[2:10]))
+    assert batch.camera.intrinsics.shape == (2, 3, 3)
+    # Each drive is held once, however many windows overlap it.
+    held = sum(d.images.nbytes for d in windows.drives)
+    assert held == sum(np.asarray(s.images).nbytes for s in seqs)
+    assert windows.all().images.nbytes > 1.6 * held  # 7 windows of 8 frames: 56 frames of 33
+    with pytest.raises(IndexError, match="within"):
+        windows.batch([len(windows)])
+
+
 def test_window_zero_batches_the_whole_sequences(seqs):
-    batch = training_windows(seqs[:2], 0)
-    assert batch.images.shape[:2] == (2, 12)
+    windows = training_windows(seqs[:2], 0)
+    assert windows.all().images.shape[:2] == (2, 12)
     with pytest.raises(ValueError, match="sequence 2 has"):
         training_windows(seqs, 0)
 

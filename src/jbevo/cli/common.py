@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -189,6 +190,37 @@ def optimizer_options(lr: float, epochs: int, window: int, batch: int, whole: bo
     return p
 
 
+def distributed_options() -> argparse.ArgumentParser:
+    """A parent parser with the options that make a command one process of several
+    (:mod:`jbevo.training.distributed`)."""
+    p = argparse.ArgumentParser(add_help=False)
+    g = p.add_argument_group(
+        "several processes (one per host or accelerator; jax.distributed)",
+        "with --distributed alone, JAX reads the coordinator, the process count and id from its "
+        "environment (JAX_COORDINATOR_ADDRESS) or the cluster (SLURM, Open MPI, Kubernetes)",
+    )
+    g.add_argument("--distributed", action="store_true", help="join a job of several processes")
+    g.add_argument("--coordinator", metavar="HOST:PORT", help="process 0's address (implies --distributed)")
+    g.add_argument("--num-processes", type=positive_int, help="how many processes the job has (implies --distributed)")
+    g.add_argument("--process-id", type=non_negative_int, help="this process's index, from 0 (implies --distributed)")
+    return p
+
+
+def join_job(args: argparse.Namespace) -> None:
+    """Join the job of several processes that ``args`` asks for (:func:`distributed_options`);
+    nothing otherwise. Only process 0 prints to stdout afterwards."""
+    from jbevo.training import distributed
+
+    if not (args.distributed or args.coordinator or args.num_processes is not None or args.process_id is not None):
+        return
+    try:
+        distributed.initialize(args.coordinator, args.num_processes, args.process_id)
+    except (ValueError, RuntimeError) as error:
+        raise CommandError(f"joining the job of several processes: {error}") from None
+    if not distributed.is_main():
+        sys.stdout = open(os.devnull, "w")  # for the rest of this process
+
+
 def parser(prog: str, doc: str | None, parents: Sequence[argparse.ArgumentParser] = ()) -> argparse.ArgumentParser:
     """A command's parser: ``prog``, the module docstring as description, the parent parsers."""
     return argparse.ArgumentParser(
@@ -215,8 +247,10 @@ __all__ = [
     "GridAction",
     "best_checkpoint",
     "dataset_options",
+    "distributed_options",
     "diverged_as_command_error",
     "grid_option",
+    "join_job",
     "json_args",
     "non_negative_int",
     "optimizer_options",

@@ -13,6 +13,10 @@ pose files of the planar poses lifted to z = 0 (score them with
 ``python -m jbevo.metrics --up-axis 2``), ``plots/NAME.png`` (top view), and ``metrics.json``
 with per-sequence and overall ``t_err_pct``, ``r_err_deg_per_100m``, ``ate_m`` and
 ``frames_per_s``. Without ``--checkpoint`` the hand-set parameters are evaluated.
+
+With ``--distributed`` the command is one process of several (:mod:`jbevo.training.distributed`):
+each loads and runs its share of the sequences (every ``N``-th) on its own devices, and process 0
+gathers the trajectories, writes every file and scores them all, as one process would.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -35,7 +40,7 @@ from jbevo.files import write_json_atomic
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.progress import progress
-from jbevo.training import checkpoint
+from jbevo.training import checkpoint, distributed
 
 ATTITUDE_SOURCES = ("filter", "zero", "accel", "truth")
 
@@ -57,6 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
             common.dataset_options(default_frames=120),
             common.grid_option(BevGrid(0.1, (128, 128), near=7.5)),
             common.seed_option(1000, "first seed of the synthetic drives (training uses 0..)"),
+            common.distributed_options(),
         ],
     )
     p.add_argument("--checkpoint", type=Path, help="a checkpoint file or a training output folder (its best.ckpt)")
@@ -82,19 +88,27 @@ def evaluate(args: argparse.Namespace) -> int:
         names: list[str] = [str(args.seed + i) for i in range(count)]
     else:
         names = list(args.sequences or splits.KITTI_TEST)
+    common.join_job(args)
+    if len(names) < jax.process_count():
+        raise common.CommandError(f"{len(names)} sequence(s) cannot be shared by {jax.process_count()} processes")
+    # This process's share; each sequence keeps the seed of its place in the whole list.
+    mine = distributed.share(list(range(len(names))))
     with common.reading(f"the {args.dataset} dataset"):
-        seqs = load_sequences(
-            args.dataset,
-            names,
-            args.frames,
-            args.kitti_poses,
-            args.kitti_root,
-            args.camera,
-            args.town,
-            seed=args.seed,
-            kitti_imu=args.kitti_imu,
-        )
-    common.require_imu(seqs, names, args.attitude, "--attitude zero|truth")
+        seqs = [
+            load_sequences(
+                args.dataset,
+                [names[i]],
+                args.frames,
+                args.kitti_poses,
+                args.kitti_root,
+                args.camera,
+                args.town,
+                seed=args.seed + i,
+                kitti_imu=args.kitti_imu,
+            )[0]
+            for i in mine
+        ]
+    common.require_imu(seqs, [names[i] for i in mine], args.attitude, "--attitude zero|truth")
     if args.dataset == "synthetic":
         names = [f"synthetic_{n}" for n in names]
     lengths = segment_lengths(args.dataset, args.frames)
@@ -102,6 +116,15 @@ def evaluate(args: argparse.Namespace) -> int:
     with common.reading(f"the checkpoint {args.checkpoint}"):
         model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands)
     outputs, fps = run_many(model, seqs, args.warm_start)
+    # Process 0 writes and scores every sequence: the trajectories and the truth (not the
+    # images) of the others' shares come to it.
+    shares = distributed.gather_objects((mine, outputs, [_without_images(q) for q in seqs], fps))
+    if not distributed.is_main():
+        return 0
+    gathered = sorted((item for share in shares for item in zip(*share[:3])), key=lambda item: item[0])
+    outputs, seqs = [item[1] for item in gathered], [item[2] for item in gathered]
+    fps = sum(share[3] for share in shares)
+    devices = len(jax.devices())
 
     per_sequence = {}
     for name, out, seq in progress(list(zip(names, outputs, seqs)), "writing poses and plots"):
@@ -118,9 +141,7 @@ def evaluate(args: argparse.Namespace) -> int:
     overall = score(outputs, seqs, lengths)  # the devkit pools the segments of all sequences
     overall = {k: overall[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m", "motion_rmse_m", "yaw_rmse_deg", "segments")}
     overall["frames_per_s"] = fps
-    print(
-        f"overall: {format_scores(overall | {'segment_lengths_m': list(lengths)})}  {fps:.0f} frames/s on {len(jax.local_devices())} device(s)"
-    )
+    print(f"overall: {format_scores(overall | {'segment_lengths_m': list(lengths)})}  {fps:.0f} frames/s on {devices} device(s)")
     write_json_atomic(
         args.out / "metrics.json",
         {
@@ -131,11 +152,17 @@ def evaluate(args: argparse.Namespace) -> int:
             "attitude": args.attitude,
             "bands": model.bands is not None,
             "warm_start": args.warm_start,
-            "devices": [str(d) for d in jax.local_devices()],
+            "devices": [str(d) for d in jax.devices()],
+            "processes": jax.process_count(),
         },
     )
     print(f"wrote {args.out}")
     return 0
+
+
+def _without_images(seq):
+    """``seq`` with an empty image stack: what scoring and drawing read, light to gather."""
+    return eqx.tree_at(lambda q: q.images, seq, np.zeros((seq.num_frames, 0, 0), np.uint8))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,7 +13,9 @@ supervision. Each window starts at the true pose, with the attitude filter warm-
 had run before) and the pose filter's initial standard deviations. After every epoch the whole
 validation quarter is localized; ``OUT/best.ckpt`` keeps the lowest mean position error and
 ``OUT/last.ckpt`` the latest state (atomic); ``--resume`` continues from ``OUT/last.ckpt``;
-``OUT/metrics.json`` holds the validation metrics before and after.
+``OUT/metrics.json`` holds the validation metrics before and after. Each batch is split over
+every device, of every process with ``--distributed`` (as ``python -m jbevo.train``: each
+process renders the scene and slices its devices' windows; process 0 writes).
 
 ``evaluate`` localizes the test quarter (``--part``) of the scene under each ``--conditions``
 (one vmapped call: the conditions share the drive and the map) with the checkpoint (hand-set
@@ -54,9 +56,11 @@ from jbevo.models.losses import localization_loss
 from jbevo.models.presets import localization_model
 from jbevo.models.runners import run_bevo_batch, run_bevo_plus_batch
 from jbevo.progress import progress
-from jbevo.training import checkpoint
+from jbevo.training import checkpoint, distributed
+from jbevo.training.data_parallel import DataParallel
 from jbevo.training.loop import make_step, save_epoch, start_run, train_epochs
 from jbevo.training.validation import validate_localization
+from jbevo.training.windows import training_windows
 
 FILE_TAGS = {
     "BEVO+": "bevo_plus",
@@ -79,6 +83,10 @@ def _print(label: str, m: dict) -> None:
 def train(args: argparse.Namespace) -> int:
     """Train BEVO+ end to end on a scene's first two quarters, validating on the third."""
     t_start = time.perf_counter()
+    common.join_job(args)
+    parallel = DataParallel.create()
+    with common.reading("--batch"):
+        parallel.check_batch(args.batch)
     world = World.create(args.town)
     frames = args.frames or None
     with common.reading("the scene"):
@@ -102,15 +110,15 @@ def train(args: argparse.Namespace) -> int:
     seq = train_scene.sequence
     if seq.num_frames < args.window:
         raise common.CommandError(f"the training part has {seq.num_frames} frames, fewer than --window {args.window}")
-    windows = sq.windows(seq, args.window, args.window // 2)
+    windows = training_windows([seq], args.window, args.window // 2)
     map_ = train_scene.map
 
     def loss(m, batch):
         out = jax.vmap(lambda s: m(s, map_, warm_start=True))(batch)
         return jnp.mean(jax.vmap(lambda o, s: localization_loss(o, s, args.yaw_weight))(out, batch))
 
-    step = make_step(static, optimizer, loss)
-    epochs = train_epochs(step, params, static, opt_state, windows, args.batch, args.seed, progress_, args.epochs)
+    step = make_step(static, optimizer, loss, parallel)
+    epochs = train_epochs(step, params, static, opt_state, windows, args.batch, args.seed, progress_, args.epochs, parallel)
     with common.diverged_as_command_error():
         for model, opt_state, mean_loss in epochs:
             val = validate_localization(model, val_scene.sequence, val_scene.map)
@@ -122,6 +130,8 @@ def train(args: argparse.Namespace) -> int:
             )
             save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", val["mean_position_error_m"])
 
+    if not distributed.is_main():
+        return 0  # process 0 reports the run and writes its metrics
     best_model, best_epoch = common.best_checkpoint(args.out)
     after = validate_localization(best_model, val_scene.sequence, val_scene.map)
     _print(f"validation after training (best checkpoint, epoch {best_epoch})", after)
@@ -139,6 +149,8 @@ def train(args: argparse.Namespace) -> int:
             "skipped_steps": progress_.get("skipped_steps", 0),
             "history": progress_["history"],
             "seconds": time.perf_counter() - t_start,
+            "devices": parallel.size,
+            "processes": jax.process_count(),
             "args": common.json_args(args),
         },
     )
@@ -220,7 +232,12 @@ def build_parser() -> argparse.ArgumentParser:
     seed = common.seed_option(0, "the drive")
     t = sub.add_parser(
         "train",
-        parents=[scene_options, seed, common.optimizer_options(lr=0.02, epochs=3, window=64, batch=4)],
+        parents=[
+            scene_options,
+            seed,
+            common.optimizer_options(lr=0.02, epochs=3, window=64, batch=4),
+            common.distributed_options(),
+        ],
         help="learn BEVO+ end to end",
     )
     t.add_argument("--town", choices=sorted(TOWNS), default="town01")

@@ -16,6 +16,16 @@ validates best (``t_err_pct``, or ATE where the validation drives are too short 
 and ``OUT/last.ckpt`` the latest state (both atomic); ``--resume`` continues from
 ``OUT/last.ckpt``. The validation metrics before and after training are printed and written to
 ``OUT/metrics.json``.
+
+Each batch is split over every device (``--batch`` a multiple of their count; on a CPU,
+``XLA_FLAGS=--xla_force_host_platform_device_count=4`` makes four), the gradient averaged across
+them: the result equals one device's to round-off. With ``--distributed`` the command is one
+process of several (:mod:`jbevo.training.distributed`): each reads the training drives, slices
+only its devices' windows of each batch, and validates like the others; process 0 writes the
+checkpoints and metrics.
+
+    python -m jbevo.train --coordinator localhost:6789 --num-processes 2 --process-id 0 &
+    python -m jbevo.train --coordinator localhost:6789 --num-processes 2 --process-id 1
 """
 
 from __future__ import annotations
@@ -37,6 +47,8 @@ from jbevo.files import write_json_atomic
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.models.bevo import Bevo
 from jbevo.models.losses import motion_loss
+from jbevo.training import distributed
+from jbevo.training.data_parallel import DataParallel
 from jbevo.training.loop import make_step, save_epoch, start_run, train_epochs
 from jbevo.training.validation import validate
 from jbevo.training.windows import training_windows
@@ -79,6 +91,7 @@ def build_parser() -> argparse.ArgumentParser:
             common.grid_option(DEFAULT_GRID),
             common.optimizer_options(lr=0.03, epochs=24, window=0, batch=4, whole=True),
             common.seed_option(),
+            common.distributed_options(),
         ],
     )
     p.add_argument(
@@ -122,6 +135,10 @@ def train(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     if args.dataset == "synthetic" and args.sequences < 2:
         raise common.CommandError("the synthetic dataset needs --sequences >= 2 (one fifth, at least one, validates)")
+    common.join_job(args)
+    parallel = DataParallel.create()
+    with common.reading("--batch"):
+        parallel.check_batch(args.batch)
     train_seqs, val_seqs, lengths = load_datasets(args)
     if args.val_window:  # windows of a few seconds hold no 100 m segments
         lengths = SHORT_SEGMENTS
@@ -131,9 +148,11 @@ def train(args: argparse.Namespace) -> int:
             Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
         )
         windows = training_windows(train_seqs, args.window)
+    del train_seqs  # the windows hold the drives; a window is sliced from them when drawn
     print(
-        f"BEVO: {model.num_learnable()} learnable parameters; {len(train_seqs)} training and {len(val_seqs)} validation sequences "
-        f"({args.dataset}); segment lengths {list(lengths)} m"
+        f"BEVO: {model.num_learnable()} learnable parameters; {len(windows.drives)} training and {len(val_seqs)} validation "
+        f"sequences ({args.dataset}); segment lengths {list(lengths)} m; {len(windows)} windows in batches of {args.batch} "
+        f"over {parallel.size} device(s) in {jax.process_count()} process(es)"
     )
 
     hand_set = Bevo.create(model.grid, imu_dt, bands=model.bands is not None)
@@ -152,8 +171,8 @@ def train(args: argparse.Namespace) -> int:
         out = jax.vmap(lambda q: m(q, warm_start=warm))(batch)
         return jnp.mean(jax.vmap(lambda o, s: motion_loss(o, s, args.yaw_weight))(out, batch))
 
-    step = make_step(static, optimizer, loss)
-    epochs = train_epochs(step, params, static, opt_state, windows, args.batch, args.seed, progress, args.epochs)
+    step = make_step(static, optimizer, loss, parallel)
+    epochs = train_epochs(step, params, static, opt_state, windows, args.batch, args.seed, progress, args.epochs, parallel)
     with common.diverged_as_command_error():
         for model, opt_state, mean_loss in epochs:
             val = validate(model, val_seqs, lengths, args.val_window, val_warm)
@@ -164,6 +183,8 @@ def train(args: argparse.Namespace) -> int:
             print(f"epoch {epoch}: loss {mean_loss:.5f}  validation {format_scores(val)}")
             save_epoch(args.out, model, opt_state, progress, "best_t_err_pct", criterion(val))
 
+    if not distributed.is_main():
+        return 0  # process 0 reports the run and writes its metrics
     best, best_epoch = common.best_checkpoint(args.out)
     after = validate(best, val_seqs, lengths, args.val_window, val_warm)
     print(f"validation after training (best checkpoint, epoch {best_epoch}): {format_scores(after)}")
@@ -191,6 +212,8 @@ def train(args: argparse.Namespace) -> int:
             "skipped_steps": progress.get("skipped_steps", 0),
             "history": progress["history"],
             "seconds": time.perf_counter() - t_start,
+            "devices": parallel.size,
+            "processes": jax.process_count(),
             "args": common.json_args(args),
         },
     )

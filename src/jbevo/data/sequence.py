@@ -99,8 +99,9 @@ def window(seq: Sequence, start: int, length: int) -> Sequence:
     )
 
 
-def stack(seqs: list[Sequence]) -> Sequence:
-    """Batch sequences of one length and image size (a leading axis on every array)."""
+def check_stackable(seqs: list[Sequence]) -> None:
+    """Raise ``ValueError`` unless ``seqs`` (at least one) share one length, IMU block size, camera
+    image size and layout: what :func:`stack` needs."""
     if not seqs:
         raise ValueError("stack needs at least one sequence")
     structure = jax.tree_util.tree_structure(seqs[0])
@@ -109,6 +110,11 @@ def stack(seqs: list[Sequence]) -> Sequence:
             raise ValueError(f"sequence {i} differs from sequence 0 in camera image size or layout")
         if q.frame_times.shape != seqs[0].frame_times.shape or q.imu_times.shape != seqs[0].imu_times.shape:
             raise ValueError(f"sequence {i} has {q.imu_times.shape} frames x IMU samples, sequence 0 {seqs[0].imu_times.shape}")
+
+
+def stack(seqs: list[Sequence]) -> Sequence:
+    """Batch sequences of one length and image size (a leading axis on every array)."""
+    check_stackable(seqs)
     return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *seqs)
 
 
@@ -120,4 +126,4 @@ def windows(seq: Sequence, length: int, stride: int | None = None) -> Sequence:
     return stack([window(seq, s, length) for s in range(0, seq.num_frames - length + 1, stride)])
 
 
-__all__ = ["Sequence", "check", "stack", "window", "windows"]
+__all__ = ["Sequence", "check", "check_stackable", "stack", "window", "windows"]

@@ -7,7 +7,11 @@ meets a degenerate corner of the recursion, while the loss itself is finite) is 
 parameters and Adam's moments stay as they were (``optax.apply_if_finite``), a warning names the
 step, and ``progress["skipped_steps"]`` counts it. After :data:`MAX_SKIPPED_IN_A_ROW` such steps
 in a row the update is applied, and the non-finite loss that follows ends the run as
-:class:`TrainingDiverged`."""
+:class:`TrainingDiverged`.
+
+With a :class:`jbevo.training.data_parallel.DataParallel` the batch is split over its devices
+(of every process), each process slicing only its devices' windows, and the parameters and
+Adam's state are replicated; the models yielded are this process's copy."""
 
 from __future__ import annotations
 
@@ -22,18 +26,32 @@ import optax
 from tqdm import tqdm
 
 from jbevo.training import checkpoint
+from jbevo.training.data_parallel import DataParallel, local_copy
+from jbevo.training.windows import Windows
 
 #: Consecutive steps with a non-finite gradient that are skipped before the run gives up.
 MAX_SKIPPED_IN_A_ROW = 3
 
 
-def make_step(static: Any, optimizer: optax.GradientTransformation, loss: Callable[[Any, Any], jax.Array]):
+def make_step(
+    static: Any,
+    optimizer: optax.GradientTransformation,
+    loss: Callable[[Any, Any], jax.Array],
+    parallel: DataParallel | None = None,
+):
     """A jitted ``step(params, opt_state, batch) -> (params, opt_state, loss)`` for
-    ``loss(model, batch)``, the model being ``eqx.combine(params, static)``."""
+    ``loss(model, batch)`` (a mean over the batch), the model being ``eqx.combine(params, static)``;
+    with ``parallel`` (more than one device) the loss and gradient are computed per shard of the
+    batch and averaged over the devices."""
+
+    def per_batch(params, batch):
+        return jax.value_and_grad(lambda p: loss(eqx.combine(p, static), batch))(params)
+
+    value_and_grad = per_batch if parallel is None or parallel.size == 1 else parallel.mean_over_batch(per_batch)
 
     @eqx.filter_jit
     def step(params, opt_state, batch):
-        value, grads = jax.value_and_grad(lambda p: loss(eqx.combine(p, static), batch))(params)
+        value, grads = value_and_grad(params, batch)
         updates, opt_state = optimizer.update(grads, opt_state, params)
         return optax.apply_updates(params, updates), opt_state, value
 
@@ -47,15 +65,39 @@ class TrainingDiverged(RuntimeError):
 def skipped_steps(opt_state: Any) -> int:
     """How many steps ``opt_state`` (of :func:`start_run`'s optimizer) has skipped for a
     non-finite gradient; 0 for any other optimizer state."""
-    return int(getattr(opt_state, "total_notfinite", 0))
+    return int(local_copy(getattr(opt_state, "total_notfinite", 0)))
 
 
-def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.Generator, label: str):
-    """One pass over the ``windows`` (a batched pytree) in shuffled batches of ``batch``:
-    ``(params, opt_state, mean loss, steps)``. A non-finite loss, or a runtime check inside the
-    model that meets a non-finite value, raises :class:`TrainingDiverged`; a step the optimizer
-    skipped for a non-finite gradient is reported on stderr."""
-    n = jax.tree_util.tree_leaves(windows)[0].shape[0]
+def take_batch(windows: Windows | Any, idx: np.ndarray, parallel: DataParallel | None = None) -> Any:
+    """Windows ``idx`` of ``windows`` (a :class:`Windows`, or any batched pytree) as one batch;
+    with ``parallel``, a global batch split over its devices, this process slicing only the
+    windows its devices hold."""
+    size = len(idx)
+    if parallel is not None:
+        idx = idx[parallel.local_rows(size)]
+    if isinstance(windows, Windows):
+        chunk = windows.batch(idx)
+    else:
+        chunk = jax.tree_util.tree_map(lambda x: x[idx], windows)
+    return chunk if parallel is None else parallel.put_batch(chunk, size)
+
+
+def run_epoch(
+    step,
+    params,
+    opt_state,
+    windows: Windows | Any,
+    batch: int,
+    rng: np.random.Generator,
+    label: str,
+    parallel: DataParallel | None = None,
+):
+    """One pass over the ``windows`` (a :class:`Windows` or a batched pytree) in shuffled batches
+    of ``batch`` (:func:`take_batch`): ``(params, opt_state, mean loss, steps)``. A non-finite
+    loss, or a runtime check inside the model that meets a non-finite value, raises
+    :class:`TrainingDiverged`; a step the optimizer skipped for a non-finite gradient is reported
+    on stderr."""
+    n = len(windows) if isinstance(windows, Windows) else jax.tree_util.tree_leaves(windows)[0].shape[0]
     order = rng.permutation(n)
     steps = max(1, n // batch)
     bar = tqdm(range(steps), desc=label, file=sys.stderr, leave=False, disable=None)
@@ -63,7 +105,7 @@ def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.
     before = skipped_steps(opt_state)
     for i in bar:
         idx = order[i * batch : (i + 1) * batch]
-        chunk = jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows)
+        chunk = take_batch(windows, idx, parallel)
         try:
             params, opt_state, loss = step(params, opt_state, chunk)
         except eqx.EquinoxRuntimeError as error:  # a check inside the model met a NaN state
@@ -73,30 +115,46 @@ def run_epoch(step, params, opt_state, windows: Any, batch: int, rng: np.random.
             raise TrainingDiverged(
                 f"the model produced non-finite values at {label}, step {i} ({reason}); lower the learning rate"
             ) from None
-        if not np.isfinite(float(loss)):
-            raise TrainingDiverged(f"the loss became {float(loss)} at {label}, step {i}; lower the learning rate")
+        loss = float(local_copy(loss))
+        if not np.isfinite(loss):
+            raise TrainingDiverged(f"the loss became {loss} at {label}, step {i}; lower the learning rate")
         if (skipped := skipped_steps(opt_state)) > before:
             tqdm.write(f"{label}, step {i}: the gradient is not finite; the update was skipped", file=sys.stderr)
         before = skipped
-        losses.append(float(loss))
+        losses.append(loss)
         bar.set_postfix(loss=f"{np.mean(losses[-10:]):.5f}")
     return params, opt_state, float(np.mean(losses)), steps
 
 
-def train_epochs(step, params, static, opt_state, windows: Any, batch: int, seed: int, progress: dict, epochs: int):
+def train_epochs(
+    step,
+    params,
+    static,
+    opt_state,
+    windows: Windows | Any,
+    batch: int,
+    seed: int,
+    progress: dict,
+    epochs: int,
+    parallel: DataParallel | None = None,
+):
     """Run the epochs from ``progress["epoch"]`` up to ``epochs`` (:func:`run_epoch` each, the
     shuffling drawn from one generator seeded by ``seed`` plus the epoch started from: a resumed
-    run shuffles its epochs differently from an uninterrupted one), counting them in
-    ``progress``; after each, yield ``(model, opt_state, mean loss)`` with the model rebuilt from
-    ``static``."""
+    run shuffles its epochs differently from an uninterrupted one; every process draws the same),
+    counting them in ``progress``; after each, yield ``(model, opt_state, mean loss)`` with the
+    model rebuilt from ``static`` (this process's copy of the parameters and state, with
+    ``parallel``: they are replicated over its devices for the steps)."""
+    if parallel is not None:
+        parallel.check_batch(batch)
+        params, opt_state = parallel.replicate((params, opt_state))
     rng = np.random.default_rng(seed + progress["epoch"])
     for epoch in range(progress["epoch"], epochs):
         params, opt_state, mean_loss, steps = run_epoch(
-            step, params, opt_state, windows, batch, rng, f"epoch {epoch + 1}/{epochs}"
+            step, params, opt_state, windows, batch, rng, f"epoch {epoch + 1}/{epochs}", parallel
         )
         progress["epoch"], progress["step"] = epoch + 1, progress["step"] + steps
         progress["skipped_steps"] = skipped_steps(opt_state)
-        yield eqx.combine(params, static), opt_state, mean_loss
+        yield eqx.combine(local_copy(params), static), local_copy(opt_state), mean_loss
 
 
 def start_run(model, out, lr: float, clip: float, resume: bool, best_key: str):
@@ -123,12 +181,15 @@ def start_run(model, out, lr: float, clip: float, resume: bool, best_key: str):
 def save_epoch(out, model, opt_state, progress: dict, best_key: str, criterion: float) -> None:
     """``out/last.ckpt`` always, ``out/best.ckpt`` when ``criterion`` beats ``progress[best_key]``
     (lower is better; both atomic; ``progress["best_epoch"]`` records ``progress["epoch"]``, 0 for
-    the starting parameters)."""
+    the starting parameters). Of several processes only the first writes; all update ``progress``."""
+    write = jax.process_index() == 0
     if progress[best_key] is None or criterion < progress[best_key]:
         progress[best_key] = criterion
         progress["best_epoch"] = progress["epoch"]
-        checkpoint.save(out / "best.ckpt", model, opt_state, progress)
-    checkpoint.save(out / "last.ckpt", model, opt_state, progress)
+        if write:
+            checkpoint.save(out / "best.ckpt", model, opt_state, progress)
+    if write:
+        checkpoint.save(out / "last.ckpt", model, opt_state, progress)
 
 
 def load_best(out):
@@ -147,5 +208,6 @@ __all__ = [
     "save_epoch",
     "skipped_steps",
     "start_run",
+    "take_batch",
     "train_epochs",
 ]

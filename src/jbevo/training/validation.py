@@ -20,7 +20,7 @@ def validate(model: Bevo, seqs: list[Sequence], lengths: tuple[float, ...], wind
     (``window`` 0; from a cold start, or from the truth's attitude and speed with
     ``warm_start``), or windows of ``window`` frames, each warm-started (as training runs them)."""
     if window:
-        batch = training_windows(seqs, window, stride=window)
+        batch = training_windows(seqs, window, stride=window).all()
         return score(run_bevo_batch(model, batch, True), batch, lengths)
     return score([run_bevo(model, s, warm_start) for s in seqs], seqs, lengths)
 
