@@ -34,10 +34,10 @@ def check_leaf_gradients(value, grads, params, abs_tol: float, rel_tol: float = 
     return checked
 
 
-def run_processes(module: str, argv: list[str], count: int = 2) -> list:
-    """``python -m module argv`` as ``count`` processes of one job on localhost (CPU, one device
-    each, a free port for the coordinator); their ``CompletedProcess`` results, each checked to
-    have succeeded."""
+def run_processes(module: str, argv: list[str], devices: tuple[int, ...] = (1, 1)) -> list:
+    """``python -m module argv`` as processes of one job on localhost, one per entry of
+    ``devices`` with that many CPU devices (a free port for the coordinator); their
+    ``CompletedProcess`` results, each checked to have succeeded."""
     import os
     import socket
     import subprocess
@@ -47,16 +47,16 @@ def run_processes(module: str, argv: list[str], count: int = 2) -> list:
         s.bind(("localhost", 0))
         port = s.getsockname()[1]
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"} | {"JAX_PLATFORMS": "cpu"}
-    job = ["--coordinator", f"localhost:{port}", "--num-processes", str(count)]
+    job = ["--coordinator", f"localhost:{port}", "--num-processes", str(len(devices))]
     procs = [
         subprocess.Popen(
             [sys.executable, "-m", module, *argv, *job, "--process-id", str(i)],
-            env=env,
+            env=env | {"XLA_FLAGS": f"--xla_force_host_platform_device_count={n}"},
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
         )
-        for i in range(count)
+        for i, n in enumerate(devices)
     ]
     results = []
     for p in procs:

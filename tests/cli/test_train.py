@@ -123,10 +123,12 @@ def test_two_processes_train_as_one(run_dir, tmp_path):
 
 
 def test_two_processes_evaluate_as_one(run_dir, evaluation, tmp_path):
+    """Process 0 with two devices, process 1 with one: the trajectories gather all the same."""
     out = tmp_path / "two"
-    run_processes("jbevo.evaluate", ["--checkpoint", str(run_dir / "epoch1.ckpt"), *EVALUATE, "--out", str(out)])
+    run_processes("jbevo.evaluate", ["--checkpoint", str(run_dir / "epoch1.ckpt"), *EVALUATE, "--out", str(out)], (2, 1))
     one, two = (json.loads((d / "metrics.json").read_text()) for d in (evaluation, out))
-    assert two["processes"] == 2 and list(two["per_sequence"]) == list(one["per_sequence"])  # all, in order
+    assert (two["processes"], len(two["devices"])) == (2, 3)
+    assert list(two["per_sequence"]) == list(one["per_sequence"])  # all three, in order
     for name in one["per_sequence"]:
         assert two["per_sequence"][name]["ate_m"] == pytest.approx(one["per_sequence"][name]["ate_m"], rel=1e-4)
         poses = [np.loadtxt(d / "poses" / f"{name}.txt") for d in (evaluation, out)]

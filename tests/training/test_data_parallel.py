@@ -28,6 +28,18 @@ SCRIPT = textwrap.dedent(
     windows = np.random.default_rng(0).normal(size=(24, 5, 2)).astype(np.float32)
     parallel = DataParallel.create()
     assert parallel.local_rows(8).tolist() == list(range(8))
+    try:
+        parallel.check_batch(6)
+        raise AssertionError("6 windows were split over 4 devices")
+    except ValueError as error:
+        assert "does not split evenly over 4 devices" in str(error)
+    from jbevo.cli.common import CommandError, check_batch
+    check_batch(parallel, 8, 4)  # a single short batch of 4
+    try:
+        check_batch(parallel, 4, 2)
+        raise AssertionError("2 windows were split over 4 devices")
+    except CommandError as error:
+        assert "the training set holds 2 windows, fewer than --batch 4" in str(error)
     for name, par in (("one", None), ("four", parallel)):
         params, static = eqx.partition(Line(jnp.array([0.3, -0.2])), eqx.is_inexact_array)
         optimizer = optax.adam(0.05)

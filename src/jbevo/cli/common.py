@@ -48,6 +48,36 @@ def diverged_as_command_error() -> Iterator[None]:
         raise CommandError(str(error)) from None
 
 
+@contextlib.contextmanager
+def together() -> Iterator[None]:
+    """Run a block that may fail on some processes of a job only (reading one host's files): a
+    :class:`CommandError` on any process becomes one on every process, naming the failing one,
+    so that none is left waiting in a collective. In a single process, just the block."""
+    from jbevo.training import distributed
+
+    error = None
+    try:
+        yield
+    except CommandError as e:
+        error = str(e)
+    try:
+        distributed.agree(error)
+    except RuntimeError as e:
+        raise CommandError(str(e)) from None
+
+
+def check_batch(parallel, batch: int, windows: int) -> None:
+    """A :class:`CommandError` unless the batches of ``batch`` windows drawn from ``windows``
+    (a single short one when there are fewer) split evenly over ``parallel``'s devices."""
+    if windows < 1:
+        raise CommandError("there is no training window")
+    try:
+        parallel.check_batch(min(batch, windows))
+    except ValueError as error:
+        short = f" (the training set holds {windows} windows, fewer than --batch {batch})" if windows < batch else ""
+        raise CommandError(f"--batch: {error}{short}") from None
+
+
 def best_checkpoint(out: Path):
     """The model of ``out/best.ckpt`` and its epoch (:func:`jbevo.training.loop.load_best`); says
     so when it holds the hand-set parameters."""
@@ -79,11 +109,16 @@ def run(parser: argparse.ArgumentParser, command: Callable[[argparse.Namespace],
     """Parse ``argv`` (exit 2 on a usage error) and run ``command``; a :class:`CommandError`
     prints ``prog: error: message`` and gives 1."""
     args = parser.parse_args(argv)
+    stdout = sys.stdout
     try:
         result = command(args)
     except CommandError as error:
         print(f"{parser.prog}: error: {error}", file=sys.stderr)
         return 1
+    finally:
+        if sys.stdout is not stdout:  # a process of a job other than 0 (join_job)
+            sys.stdout.close()
+            sys.stdout = stdout
     return result if isinstance(result, int) else 0
 
 
@@ -218,7 +253,7 @@ def join_job(args: argparse.Namespace) -> None:
     except (ValueError, RuntimeError) as error:
         raise CommandError(f"joining the job of several processes: {error}") from None
     if not distributed.is_main():
-        sys.stdout = open(os.devnull, "w")  # for the rest of this process
+        sys.stdout = open(os.devnull, "w")  # until the command ends (run restores it)
 
 
 def parser(prog: str, doc: str | None, parents: Sequence[argparse.ArgumentParser] = ()) -> argparse.ArgumentParser:
@@ -246,6 +281,7 @@ __all__ = [
     "CommandError",
     "GridAction",
     "best_checkpoint",
+    "check_batch",
     "dataset_options",
     "distributed_options",
     "diverged_as_command_error",
@@ -260,4 +296,5 @@ __all__ = [
     "reading",
     "run",
     "seed_option",
+    "together",
 ]

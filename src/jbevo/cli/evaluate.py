@@ -93,37 +93,40 @@ def evaluate(args: argparse.Namespace) -> int:
         raise common.CommandError(f"{len(names)} sequence(s) cannot be shared by {jax.process_count()} processes")
     # This process's share; each sequence keeps the seed of its place in the whole list.
     mine = distributed.share(list(range(len(names))))
-    with common.reading(f"the {args.dataset} dataset"):
-        seqs = [
-            load_sequences(
-                args.dataset,
-                [names[i]],
-                args.frames,
-                args.kitti_poses,
-                args.kitti_root,
-                args.camera,
-                args.town,
-                seed=args.seed + i,
-                kitti_imu=args.kitti_imu,
-            )[0]
-            for i in mine
-        ]
-    common.require_imu(seqs, [names[i] for i in mine], args.attitude, "--attitude zero|truth")
-    if args.dataset == "synthetic":
-        names = [f"synthetic_{n}" for n in names]
-    lengths = segment_lengths(args.dataset, args.frames)
-    imu_dt = seqs[0].imu_dt if np.isfinite(seqs[0].imu_dt) else 0.01
-    with common.reading(f"the checkpoint {args.checkpoint}"):
-        model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands)
+    with common.together():  # every process, or none, goes on
+        with common.reading(f"the {args.dataset} dataset"):
+            seqs = [
+                load_sequences(
+                    args.dataset,
+                    [names[i]],
+                    args.frames,
+                    args.kitti_poses,
+                    args.kitti_root,
+                    args.camera,
+                    args.town,
+                    seed=args.seed + i,
+                    kitti_imu=args.kitti_imu,
+                )[0]
+                for i in mine
+            ]
+        common.require_imu(seqs, [names[i] for i in mine], args.attitude, "--attitude zero|truth")
+        if args.dataset == "synthetic":
+            names = [f"synthetic_{n}" for n in names]
+        lengths = segment_lengths(args.dataset, args.frames)
+        imu_dt = seqs[0].imu_dt if np.isfinite(seqs[0].imu_dt) else 0.01
+        with common.reading(f"the checkpoint {args.checkpoint}"):
+            model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands)
     outputs, fps = run_many(model, seqs, args.warm_start)
     # Process 0 writes and scores every sequence: the trajectories and the truth (not the
     # images) of the others' shares come to it.
-    shares = distributed.gather_objects((mine, outputs, [_without_images(q) for q in seqs], fps))
+    frames = sum(q.num_frames for q in seqs)
+    shares = distributed.gather_objects((mine, outputs, [_without_images(q) for q in seqs], frames, frames / fps))
     if not distributed.is_main():
         return 0
     gathered = sorted((item for share in shares for item in zip(*share[:3])), key=lambda item: item[0])
     outputs, seqs = [item[1] for item in gathered], [item[2] for item in gathered]
-    fps = sum(share[3] for share in shares)
+    # The processes run their shares at once: every frame over the slowest one's time.
+    fps = sum(share[3] for share in shares) / max(share[4] for share in shares)
     devices = len(jax.devices())
 
     per_sequence = {}

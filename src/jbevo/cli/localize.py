@@ -85,17 +85,21 @@ def train(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     common.join_job(args)
     parallel = DataParallel.create()
-    with common.reading("--batch"):
-        parallel.check_batch(args.batch)
     world = World.create(args.town)
     frames = args.frames or None
-    with common.reading("the scene"):
-        train_scene = scene(args.kind, args.town, args.condition, "train", args.seed, world, frames)
-        val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames)
-    with common.reading(f"the run in {args.out}"):
-        model, params, static, optimizer, opt_state, progress_ = start_run(
-            localization_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m"
-        )
+    with common.together():  # every process, or none, goes on
+        with common.reading("the scene"):
+            train_scene = scene(args.kind, args.town, args.condition, "train", args.seed, world, frames)
+            val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames)
+        with common.reading(f"the run in {args.out}"):
+            model, params, static, optimizer, opt_state, progress_ = start_run(
+                localization_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m"
+            )
+        seq = train_scene.sequence
+        if seq.num_frames < args.window:
+            raise common.CommandError(f"the training part has {seq.num_frames} frames, fewer than --window {args.window}")
+        windows = training_windows([seq], args.window, args.window // 2)
+        common.check_batch(parallel, args.batch, len(windows))
     print(
         f"BEVO+: {model.num_learnable()} learnable parameters; {args.kind} scene in {args.town} ({args.condition}): "
         f"{train_scene.sequence.num_frames} training and {val_scene.sequence.num_frames} validation frames"
@@ -107,10 +111,6 @@ def train(args: argparse.Namespace) -> int:
         # only where it validates better.
         save_epoch(args.out, model, opt_state, progress_, "best_mean_position_error_m", before["mean_position_error_m"])
 
-    seq = train_scene.sequence
-    if seq.num_frames < args.window:
-        raise common.CommandError(f"the training part has {seq.num_frames} frames, fewer than --window {args.window}")
-    windows = training_windows([seq], args.window, args.window // 2)
     map_ = train_scene.map
 
     def loss(m, batch):

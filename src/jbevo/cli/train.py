@@ -137,17 +137,17 @@ def train(args: argparse.Namespace) -> int:
         raise common.CommandError("the synthetic dataset needs --sequences >= 2 (one fifth, at least one, validates)")
     common.join_job(args)
     parallel = DataParallel.create()
-    with common.reading("--batch"):
-        parallel.check_batch(args.batch)
-    train_seqs, val_seqs, lengths = load_datasets(args)
-    if args.val_window:  # windows of a few seconds hold no 100 m segments
-        lengths = SHORT_SEGMENTS
-    imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
-    with common.reading(f"the run in {args.out}"):
-        model, params, static, optimizer, opt_state, progress = start_run(
-            Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
-        )
-        windows = training_windows(train_seqs, args.window)
+    with common.together():  # every process, or none, goes on
+        train_seqs, val_seqs, lengths = load_datasets(args)
+        if args.val_window:  # windows of a few seconds hold no 100 m segments
+            lengths = SHORT_SEGMENTS
+        imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
+        with common.reading(f"the run in {args.out}"):
+            model, params, static, optimizer, opt_state, progress = start_run(
+                Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
+            )
+            windows = training_windows(train_seqs, args.window)
+        common.check_batch(parallel, args.batch, len(windows))
     del train_seqs  # the windows hold the drives; a window is sliced from them when drawn
     print(
         f"BEVO: {model.num_learnable()} learnable parameters; {len(windows.drives)} training and {len(val_seqs)} validation "

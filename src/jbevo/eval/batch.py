@@ -23,11 +23,14 @@ def shard_batch(batch, devices=None):
     return jax.device_put(batch, sharding)
 
 
-def run_many(model: Bevo, seqs: list[sq.Sequence], warm_start: bool = False) -> tuple[list[BevoOutput], float]:
-    """Outputs for every sequence (vmapped per group of equal length, sharded over the local
-    devices, padded to a multiple of their count; numpy arrays) and the steady-state frames per
-    second (each group is run twice: the first call compiles)."""
-    n_dev = len(jax.local_devices())
+def run_many(
+    model: Bevo, seqs: list[sq.Sequence], warm_start: bool = False, devices: list | None = None
+) -> tuple[list[BevoOutput], float]:
+    """Outputs for every sequence (vmapped per group of equal length, sharded over ``devices``,
+    default all local ones, padded to a multiple of their count; numpy arrays) and the
+    steady-state frames per second (each group is run twice: the first call compiles)."""
+    devices = jax.local_devices() if devices is None else list(devices)
+    n_dev = len(devices)
     outputs: list[BevoOutput | None] = [None] * len(seqs)
     frames, seconds = 0, 0.0
     groups: dict[tuple, list[int]] = {}
@@ -35,7 +38,7 @@ def run_many(model: Bevo, seqs: list[sq.Sequence], warm_start: bool = False) -> 
         groups.setdefault((s.num_frames, s.camera.image_shape, s.imu_times.shape[-1]), []).append(i)
     for idx in progress(list(groups.values()), "evaluating"):
         padded = idx + [idx[-1]] * (-len(idx) % n_dev)
-        batch = shard_batch(sq.stack([seqs[i] for i in padded]))
+        batch = shard_batch(sq.stack([seqs[i] for i in padded]), devices)
         jax.block_until_ready(run_bevo_batch(model, batch, warm_start))  # compile
         t0 = time.perf_counter()
         out = jax.block_until_ready(run_bevo_batch(model, batch, warm_start))
