@@ -454,6 +454,53 @@ def bevo_speed() -> str:
     return table(["BEVO, KITTI-size camera, 2-core CPU", "with bands", "without bands"], rows)
 
 
+def scaling_throughput() -> str:
+    d = record("benchmarks/results/scaling.json")["throughput"]
+    rows = [
+        [
+            name,
+            num(r["train_frames_per_s"], 0),
+            f"{r['train_speedup']:.2f}",
+            num(r["inference_frames_per_s"], 0),
+            f"{r['inference_speedup']:.2f}",
+            num(r["train_step_memory_per_device_mb"], 1),
+            " / ".join(f"{m / 1024:.2f}" for m in r["peak_rss_mb_per_process"]),
+            f"{r['final_loss_relative_difference']:.0e}",
+        ]
+        for name, r in d["configs"].items()
+    ]
+    header = [
+        "2-core CPU",
+        "training (frames/s)",
+        "x 1 device",
+        "inference (frames/s)",
+        "x 1 device",
+        "step memory per device (MB)",
+        "peak RSS per process (GB)",
+        "loss vs 1 device (rel.)",
+    ]
+    return table(header, rows)
+
+
+def scaling_memory() -> str:
+    d = record("benchmarks/results/scaling.json")["memory"]
+    labels = {"copies": "every window copied (as before)", "indices": "windows as start indices (Windows)"}
+    rows = [
+        [
+            labels[key],
+            str(r["window_count"]),
+            num(r["drive_images_gb"], 2),
+            num(r["window_copies_gb"], 2),
+            num(r["peak_rss_gb"], 2),
+        ]
+        for key, r in d["rows"].items()
+    ]
+    rows.append(["peak RSS, copies / indices", "", "", "", f"{d['peak_rss_ratio']:.2f}x"])
+    return table(
+        ["KITTI-style training set + one step", "windows", "drive images (GB)", "window copies (GB)", "peak RSS (GB)"], rows
+    )
+
+
 def simulator_speed() -> str:
     d = record("benchmarks/results/simulator.json")
     rows = [
@@ -767,6 +814,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "bev_speed": bev_speed,
     "bevo_speed": bevo_speed,
     "simulator_speed": simulator_speed,
+    "scaling_throughput": scaling_throughput,
+    "scaling_memory": scaling_memory,
     "builtin_training": builtin_training,
     "bands": bands,
     "kitti_odometry": kitti_odometry,

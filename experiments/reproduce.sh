@@ -13,6 +13,7 @@ python benchmarks/registration.py
 python benchmarks/bev.py
 python benchmarks/simulator.py
 python benchmarks/bevo.py
+python benchmarks/scaling.py
 python benchmarks/attitude.py
 python benchmarks/attitude_real.py
 python benchmarks/real_kitti.py
