@@ -18,8 +18,7 @@ sees).
 ``memory`` (needs the reference data): the KITTI-style run's training set (00-07 in the
 synthetic world, 500 frames each, KITTI camera 0 at full size, windows of 96 frames every 48)
 and one training step of BEVO with bands (batch 4), in a fresh process each for the windows
-materialised as copies (as training held them before: every window's frames copied and the copies
-joined) and for :class:`jbevo.training.windows.Windows` (the drives held once, a batch sliced when
+materialised as copies (every window's frames copied and the copies joined) and for :class:`jbevo.training.windows.Windows` (the drives held once, a batch sliced when
 drawn): the peak RSS of each.
 
 Writes ``benchmarks/results/scaling.json`` (the parts run; the other part's record is kept).
@@ -158,7 +157,7 @@ def memory_worker(args: argparse.Namespace) -> None:
     seqs = load_sequences("kitti-synthetic", names, args.frames, poses, None, "kitti", seed=0)
     after_loading = peak_rss_mb()
     drive_bytes = sum(int(np.asarray(q.images).nbytes) for q in seqs)
-    if args.windows == "copies":  # as training held them before: copies, then joined
+    if args.windows == "copies":  # materialised: copies, then joined
         parts = [sq.windows(q, args.window, args.window // 2) for q in seqs if q.num_frames >= args.window]
         windows = jax.tree_util.tree_map(lambda *x: jnp.concatenate(x), *parts)
         del parts

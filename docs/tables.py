@@ -484,7 +484,7 @@ def scaling_throughput() -> str:
 
 def scaling_memory() -> str:
     d = record("benchmarks/results/scaling.json")["memory"]
-    labels = {"copies": "every window copied (as before)", "indices": "windows as start indices (Windows)"}
+    labels = {"copies": "every window copied", "indices": "windows as start indices (Windows)"}
     rows = [
         [
             labels[key],

@@ -2,8 +2,8 @@
 
 A :class:`Windows` holds each drive once (host numpy arrays) and a window as a drive index and a
 start frame; :meth:`Windows.batch` slices the frames of the windows asked for and stacks them, so
-the training set's memory is the drives' whatever the windows' overlap (a stride of half a window
-used to hold every frame twice more, once per window and once more while they were joined)."""
+the training set's memory is the drives' whatever the windows' overlap (materialised windows
+every half a window hold every frame twice more, and once more while they are joined)."""
 
 from __future__ import annotations
 
