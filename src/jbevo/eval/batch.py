@@ -28,7 +28,8 @@ def run_many(
 ) -> tuple[list[BevoOutput], float]:
     """Outputs for every sequence (vmapped per group of equal length, sharded over ``devices``,
     default all local ones, padded to a multiple of their count; numpy arrays) and the
-    steady-state frames per second (each group is run twice: the first call compiles)."""
+    steady-state frames per second of the sequences given, the padding not counted (each group is
+    run twice: the first call compiles)."""
     devices = jax.local_devices() if devices is None else list(devices)
     n_dev = len(devices)
     outputs: list[BevoOutput | None] = [None] * len(seqs)
@@ -43,7 +44,7 @@ def run_many(
         t0 = time.perf_counter()
         out = jax.block_until_ready(run_bevo_batch(model, batch, warm_start))
         seconds += time.perf_counter() - t0
-        frames += len(padded) * seqs[idx[0]].num_frames
+        frames += len(idx) * seqs[idx[0]].num_frames
         for j, i in enumerate(idx):
             outputs[i] = jax.tree_util.tree_map(lambda x, j=j: np.asarray(x[j]), out)
     return outputs, frames / seconds  # type: ignore[return-value]
