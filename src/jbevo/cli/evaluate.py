@@ -95,20 +95,18 @@ def evaluate(args: argparse.Namespace) -> int:
     mine = distributed.share(list(range(len(names))))
     with common.together():  # every process, or none, goes on
         with common.reading(f"the {args.dataset} dataset"):
-            seqs = [
-                load_sequences(
-                    args.dataset,
-                    [names[i]],
-                    args.frames,
-                    args.kitti_poses,
-                    args.kitti_root,
-                    args.camera,
-                    args.town,
-                    seed=args.seed + i,
-                    kitti_imu=args.kitti_imu,
-                )[0]
-                for i in mine
-            ]
+            seqs = load_sequences(
+                args.dataset,
+                [names[i] for i in mine],
+                args.frames,
+                args.kitti_poses,
+                args.kitti_root,
+                args.camera,
+                args.town,
+                seed=args.seed,
+                kitti_imu=args.kitti_imu,
+                positions=mine,
+            )
         common.require_imu(seqs, [names[i] for i in mine], args.attitude, "--attitude zero|truth")
         if args.dataset == "synthetic":
             names = [f"synthetic_{n}" for n in names]

@@ -25,13 +25,17 @@ def load_sequences(
     town: str = "town01",
     seed: int = 0,
     kitti_imu: Path | None = None,
+    positions: list[int] | None = None,
 ) -> list[Sequence]:
     """The sequences ``names`` of ``dataset``. For ``synthetic``, ``names`` are seeds (one
     procedural drive each, ``frames`` frames); for ``kitti-synthetic`` KITTI sequence names whose
     pose files are in ``kitti_poses`` (``frames`` caps the length, 0 = all; ``camera`` small or
     kitti; with ``kitti_imu``, the folder of the KITTI odometry IMU files, the real IMU, calibrated
     per recording day on 00-08, and frames rendered at the attitude it sees:
-    :func:`jbevo.data.synthetic.sequences.kitti_sequence`); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is missing."""
+    :func:`jbevo.data.synthetic.sequences.kitti_sequence`; the drive at place ``i`` of the list is
+    rendered with seed ``seed + i``, or ``seed + positions[i]`` where ``names`` is a share of a
+    longer list); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is
+    missing."""
     if dataset == "synthetic":
         return [builtin_dataset(frames, 1, town, int(n))[0] for n in progress(names, "rendering synthetic drives")]
     if dataset == "kitti-synthetic":
@@ -43,7 +47,10 @@ def load_sequences(
         world = World.create(town)
         cam = small_camera() if camera == "small" else Camera.kitti()
         out = []
-        for i, name in enumerate(progress(names, "rendering KITTI motion in the synthetic world")):
+        places = range(len(names)) if positions is None else positions
+        if len(places) != len(names):
+            raise ValueError(f"{len(places)} positions for {len(names)} sequence names")
+        for i, name in zip(places, progress(names, "rendering KITTI motion in the synthetic world")):
             path = Path(kitti_poses) / f"{name}.txt"
             if not path.is_file():
                 raise ValueError(f"no KITTI pose file {path}")

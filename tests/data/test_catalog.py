@@ -1,0 +1,21 @@
+"""The commands' datasets: a share of a list of KITTI-style drives renders each drive as the
+whole list does (its seed is its place in the whole list)."""
+
+import numpy as np
+import pytest
+
+from jbevo.data.catalog import load_sequences
+
+
+def test_a_share_renders_its_drives_as_the_whole_list(reference_data):
+    poses = reference_data / "kitti_odom" / "gt_poses"
+    whole = load_sequences("kitti-synthetic", ["04", "05", "06"], 8, poses, seed=7)
+    share = load_sequences("kitti-synthetic", ["04", "06"], 8, poses, seed=7, positions=[0, 2])
+    for a, b in zip(share, [whole[0], whole[2]], strict=True):
+        np.testing.assert_array_equal(np.asarray(a.images), np.asarray(b.images))
+        np.testing.assert_array_equal(np.asarray(a.gyro), np.asarray(b.gyro))
+    assert not np.array_equal(
+        np.asarray(share[1].gyro), np.asarray(load_sequences("kitti-synthetic", ["06"], 8, poses, seed=7)[0].gyro)
+    )
+    with pytest.raises(ValueError, match="1 positions for 2 sequence names"):
+        load_sequences("kitti-synthetic", ["04", "06"], 8, poses, positions=[0])
