@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from jbevo.data.catalog import DATASETS
+from jbevo.data.synthetic.street import WORLDS
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.training.loop import TrainingDiverged, load_best
@@ -195,6 +196,12 @@ def dataset_options(default_frames: int) -> argparse.ArgumentParser:
         help="frames per sequence (synthetic; a cap for kitti-synthetic, 0 = all)",
     )
     p.add_argument("--town", choices=sorted(TOWNS), default="town01", help="synthetic world")
+    p.add_argument(
+        "--world",
+        choices=sorted(WORLDS),
+        default="flat",
+        help="synthetic world kind: flat (a level textured plane) or street (structures, slopes, camera mounting, exposure)",
+    )
     p.add_argument("--camera", choices=("small", "kitti"), default="small", help="kitti-synthetic camera: 128x416 or 376x1241")
     return p
 

@@ -106,6 +106,7 @@ def evaluate(args: argparse.Namespace) -> int:
                 seed=args.seed,
                 kitti_imu=args.kitti_imu,
                 positions=mine,
+                world=args.world,
             )
         common.require_imu(seqs, [names[i] for i in mine], args.attitude, "--attitude zero|truth")
         if args.dataset == "synthetic":

@@ -45,6 +45,7 @@ from jbevo.data.pose_files import write_kitti
 from jbevo.data.splits import PARTS
 from jbevo.data.synthetic.conditions import CONDITIONS
 from jbevo.data.synthetic.scenes import SCENE_KINDS, scene
+from jbevo.data.synthetic.street import WORLDS, street_named
 from jbevo.data.synthetic.world import TOWNS, World
 from jbevo.eval.plots import trajectory_top_view
 from jbevo.eval.scores import pose_errors
@@ -89,8 +90,9 @@ def train(args: argparse.Namespace) -> int:
     frames = args.frames or None
     with common.together():  # every process, or none, goes on
         with common.reading("the scene"):
-            train_scene = scene(args.kind, args.town, args.condition, "train", args.seed, world, frames)
-            val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames)
+            street = street_named(args.world)
+            train_scene = scene(args.kind, args.town, args.condition, "train", args.seed, world, frames, street)
+            val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames, street)
         with common.reading(f"the run in {args.out}"):
             model, params, static, optimizer, opt_state, progress_ = start_run(
                 localization_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m"
@@ -140,6 +142,7 @@ def train(args: argparse.Namespace) -> int:
         {
             "kind": args.kind,
             "town": args.town,
+            "world": args.world,
             "condition": args.condition,
             "before": before,
             "after": after,
@@ -169,7 +172,7 @@ def evaluate(args: argparse.Namespace) -> dict:
     frames = args.frames or None
     with common.reading("the scene"):
         scenes = [
-            scene(args.kind, args.town, c, args.part, args.seed, world, frames)
+            scene(args.kind, args.town, c, args.part, args.seed, world, frames, street_named(args.world))
             for c in progress(args.conditions, "rendering scenes")
         ]
     batch = sq.stack([s.sequence for s in scenes])
@@ -210,6 +213,7 @@ def evaluate(args: argparse.Namespace) -> dict:
         "checkpoint": str(args.checkpoint) if args.checkpoint else None,
         "kind": args.kind,
         "town": args.town,
+        "world": args.world,
         "part": args.part,
     }
     write_json_atomic(args.out / "metrics.json", summary)
@@ -228,6 +232,12 @@ def build_parser() -> argparse.ArgumentParser:
     scene_options.add_argument("--kind", choices=sorted(SCENE_KINDS), default="carla", help="scene kind (platform and map)")
     scene_options.add_argument(
         "--frames", type=common.non_negative_int, default=0, help="frames of the whole drive (0: the kind's default)"
+    )
+    scene_options.add_argument(
+        "--world",
+        choices=sorted(WORLDS),
+        default="flat",
+        help="flat, or street (structures, slopes, camera mounting, exposure; the map shows the structures' tops)",
     )
     seed = common.seed_option(0, "the drive")
     t = sub.add_parser(

@@ -16,6 +16,7 @@ from jbevo.data.sequence_file import save
 from jbevo.data.synthetic.conditions import CONDITIONS
 from jbevo.data.synthetic.imu import IMU_PRESETS, NOISELESS
 from jbevo.data.synthetic.sequences import kitti_sequence, procedural_sequence, small_camera
+from jbevo.data.synthetic.street import WORLDS, street_named
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.camera import Camera
 
@@ -27,6 +28,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=common.positive_int, default=200, help="number of frames (10 Hz)")
     p.add_argument("--town", choices=sorted(TOWNS), default="town01")
     p.add_argument("--condition", choices=sorted(CONDITIONS), default="day")
+    p.add_argument(
+        "--world", choices=sorted(WORLDS), default="flat", help="flat, or street (structures, slopes, mounting, exposure)"
+    )
     p.add_argument("--kitti-poses", type=Path, help="drive along this KITTI pose file instead of a procedural drive")
     p.add_argument("--start", type=common.non_negative_int, default=0, help="first frame of --kitti-poses")
     p.add_argument(
@@ -48,9 +52,21 @@ def render(args: argparse.Namespace) -> int:
     if args.kitti_poses:
         with common.reading(f"{args.kitti_poses}"):
             poses = read_kitti(args.kitti_poses).poses
-            seq = kitti_sequence(poses, args.start, args.frames, args.town, camera, args.condition, noise, args.seed)
+            seq = kitti_sequence(
+                poses,
+                args.start,
+                args.frames,
+                args.town,
+                camera,
+                args.condition,
+                noise,
+                args.seed,
+                street=street_named(args.world),
+            )
     else:
-        seq = procedural_sequence(args.seed, args.frames, args.town, camera, args.condition, noise)
+        seq = procedural_sequence(
+            args.seed, args.frames, args.town, camera, args.condition, noise, street=street_named(args.world)
+        )
     with common.reading(f"{args.out}"):
         save(seq, args.out)
     print(

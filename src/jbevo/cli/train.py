@@ -73,6 +73,7 @@ def load_datasets(args: argparse.Namespace) -> tuple[list[Sequence], list[Sequen
         kitti_imu=args.kitti_imu,
         camera=args.camera,
         town=args.town,
+        world=args.world,
     )
     with common.reading(f"the {args.dataset} dataset"):
         train = load_sequences(args.dataset, train_names, seed=args.seed, **options)

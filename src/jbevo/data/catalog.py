@@ -8,6 +8,7 @@ from pathlib import Path
 
 from jbevo.data.sequence import Sequence
 from jbevo.data.synthetic.sequences import builtin_dataset, kitti_sequence, small_camera
+from jbevo.data.synthetic.street import street_named
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.camera import Camera
 from jbevo.progress import progress
@@ -26,6 +27,7 @@ def load_sequences(
     seed: int = 0,
     kitti_imu: Path | None = None,
     positions: list[int] | None = None,
+    world: str = "flat",
 ) -> list[Sequence]:
     """The sequences ``names`` of ``dataset``. For ``synthetic``, ``names`` are seeds (one
     procedural drive each, ``frames`` frames); for ``kitti-synthetic`` KITTI sequence names whose
@@ -34,17 +36,19 @@ def load_sequences(
     per recording day on 00-08, and frames rendered at the attitude it sees:
     :func:`jbevo.data.synthetic.sequences.kitti_sequence`; the drive at place ``i`` of the list is
     rendered with seed ``seed + i``, or ``seed + positions[i]`` where ``names`` is a share of a
-    longer list); for ``kitti`` sequence names under ``kitti_root``. ``ValueError`` names what is
-    missing."""
+    longer list); for ``kitti`` sequence names under ``kitti_root``. ``world`` is the synthetic
+    world's kind (``flat`` or ``street``: :mod:`jbevo.data.synthetic.street`). ``ValueError``
+    names what is missing."""
+    street = street_named(world)
     if dataset == "synthetic":
-        return [builtin_dataset(frames, 1, town, int(n))[0] for n in progress(names, "rendering synthetic drives")]
+        return [builtin_dataset(frames, 1, town, int(n), street)[0] for n in progress(names, "rendering synthetic drives")]
     if dataset == "kitti-synthetic":
         if kitti_poses is None:
             raise ValueError("the kitti-synthetic dataset needs kitti_poses, the folder of KITTI pose files NN.txt")
         from jbevo.data.pose_files import read_kitti
         from jbevo.inertial.kitti_imu import calibrated_drive
 
-        world = World.create(town)
+        ground = World.create(town)
         cam = small_camera() if camera == "small" else Camera.kitti()
         out = []
         places = range(len(names)) if positions is None else positions
@@ -57,7 +61,7 @@ def load_sequences(
             poses = read_kitti(path).poses
             n = min(frames, len(poses) - 1) if frames else None
             real = None if kitti_imu is None else calibrated_drive(kitti_poses, kitti_imu, name)
-            out.append(kitti_sequence(poses, 0, n, camera=cam, world=world, seed=seed + i, real_imu=real))
+            out.append(kitti_sequence(poses, 0, n, camera=cam, world=ground, seed=seed + i, real_imu=real, street=street))
         return out
     if dataset == "kitti":
         if kitti_root is None:

@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from jbevo.data.synthetic.structures import Boxes, cast_boxes
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.camera import Camera
 
@@ -40,12 +41,21 @@ def camera_rays(camera: Camera, rotation_world_body: Float[Array, "3 3"]) -> tup
 
 
 def render(
-    world: World, camera: Camera, pose: Float[Array, "4 4"], haze_distance: float = HAZE_DISTANCE, sheen: float = 0.0
+    world: World,
+    camera: Camera,
+    pose: Float[Array, "4 4"],
+    haze_distance: float = HAZE_DISTANCE,
+    sheen: float = 0.0,
+    boxes: Boxes | None = None,
+    ground_contrast: float = 1.0,
 ) -> Float[Array, "H W"]:
     """Grayscale image in [0, 1] seen by ``camera`` at body pose ``T_world_body`` (``pose``).
 
     ``haze_distance`` (metres) sets how fast the ground fades into the horizon's grey (fog: tens
     of metres); ``sheen`` adds a wet road's reflection of the sky, strongest at grazing angles.
+    ``boxes`` (:mod:`jbevo.data.synthetic.structures`: facades, parked cars, poles) stand on the
+    ground and hide what is behind them; ``ground_contrast`` scales the ground texture's
+    contrast about mid-grey (worn, smooth asphalt: below 1).
     """
     pose = jnp.asarray(pose, camera.intrinsics.dtype)
     d, r_wc = camera_rays(camera, pose[:3, :3])
@@ -68,12 +78,19 @@ def render(
     footprint = jnp.maximum(lengths[0], lengths[1])
     x, y = jnp.where(ground, x, 0.0), jnp.where(ground, y, 0.0)
     texture = world.sample(x, y, jnp.where(ground, footprint, 1e3))
+    if ground_contrast != 1.0:  # static
+        texture = 0.45 + ground_contrast * (texture - 0.45)
     distance = s * jnp.sqrt(d[0] ** 2 + d[1] ** 2 + dz**2)
     haze = jnp.exp(-jnp.where(ground, distance, 0.0) / haze_distance)
     elevation = dz / jnp.sqrt(d[0] ** 2 + d[1] ** 2 + dz**2)
     texture = texture + sheen * (1.0 - texture) * (1.0 + elevation) ** 8  # Schlick-like grazing reflection
     sky = SKY_HORIZON + (SKY_TOP - SKY_HORIZON) * jnp.clip(elevation * 4.0, 0.0, 1.0)
     image = jnp.where(ground, haze * texture + (1 - haze) * SKY_HORIZON, sky)
+    if boxes is not None:
+        t_box, surface = cast_boxes(world, boxes, centre, d, 1.0 / k[0, 0])
+        in_front = t_box < jnp.where(ground, s, jnp.inf)
+        box_haze = jnp.exp(-jnp.where(in_front, t_box, 0.0) * jnp.sqrt(d[0] ** 2 + d[1] ** 2 + dz**2) / haze_distance)
+        image = jnp.where(in_front, box_haze * surface + (1 - box_haze) * SKY_HORIZON, image)
     return image.astype(camera.intrinsics.dtype)
 
 

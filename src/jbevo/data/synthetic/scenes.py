@@ -25,6 +25,8 @@ from jbevo.data.sequence import Sequence
 from jbevo.data.splits import part_range
 from jbevo.data.synthetic.maps import render_map
 from jbevo.data.synthetic.sequences import make_sequence, small_camera
+from jbevo.data.synthetic.street import Street
+from jbevo.data.synthetic.structures import place_structures
 from jbevo.data.synthetic.trajectories import procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.bev_grid import BevGrid
@@ -79,9 +81,12 @@ def scene(
     seed: int = 0,
     world: World | None = None,
     frames: int | None = None,
+    street: Street | None = None,
 ) -> Scene:
     """Render ``part`` of the drive ``seed`` of ``kind`` in ``town`` under ``condition``, and its
-    map. ``frames`` overrides the drive's length (tests, notebooks)."""
+    map. ``frames`` overrides the drive's length (tests, notebooks). On a ``street``
+    (:mod:`jbevo.data.synthetic.street`) the drive has its slopes, structures, camera mounting and
+    exposure, and the map shows the structures' tops."""
     kind = _kind(kind)
     if frames is not None:
         kind = SceneKind(**{**kind.__dict__, "frames": int(frames)})
@@ -91,10 +96,20 @@ def scene(
     times, poses = scene_drive(kind, seed)
     start, stop = part_range(kind.frames, part)
     # Poses [start, stop] (one more: the frame before the part starts its IMU).
+    structures = None if street is None else place_structures(poses[start + 1 : stop + 1], street, seed)
     seq = make_sequence(
-        world, small_camera(height=kind.height), times[start : stop + 1], poses[start : stop + 1], condition, seed=seed
+        world,
+        small_camera(height=kind.height),
+        times[start : stop + 1],
+        poses[start : stop + 1],
+        condition,
+        seed=seed,
+        street=street,
+        structures=structures,
     )
-    map_ = render_map(world, poses[start : stop + 1, :2, 3], kind.map_resolution, style=kind.map_style, seed=seed + 1)
+    map_ = render_map(
+        world, poses[start : stop + 1, :2, 3], kind.map_resolution, style=kind.map_style, seed=seed + 1, structures=structures
+    )
     return Scene(f"{kind.name}_{town}_{condition}_{part}_s{seed}", seq, map_)
 
 

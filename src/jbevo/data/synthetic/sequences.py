@@ -14,10 +14,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jbevo.data.kitti_frames import body_poses_from_kitti
 from jbevo.data.sequence import Sequence, check
 from jbevo.data.synthetic.conditions import CONDITIONS, Condition, draw_obstacles, expose, place_obstacles
 from jbevo.data.synthetic.imu import ADIS16448, ImuNoise, simulate_imu
 from jbevo.data.synthetic.render import render
+from jbevo.data.synthetic.street import (
+    Street,
+    exposure_gains,
+    mounted_camera,
+    recorded_road_tilt,
+    road_relative,
+    street_tilt,
+    tilt_onto_road,
+    vignette,
+)
+from jbevo.data.synthetic.structures import Boxes, nearest_boxes, place_structures
 from jbevo.data.synthetic.trajectories import kitti_drive, procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.camera import Camera
@@ -35,16 +47,27 @@ def small_camera(scale: float = 1 / 3, height: float = 1.65) -> Camera:
     return Camera(fx, fy, cx + (w - full_w * scale) / 2, cy + (h - full_h * scale) / 2, (h, w), height)
 
 
-@functools.partial(jax.jit, static_argnames=("condition",))
-def _frames(world, camera, poses, times, obstacles, keys, condition: Condition):
+@functools.partial(jax.jit, static_argnames=("condition", "ground_contrast"))
+def _frames(
+    world, camera, poses, times, obstacles, keys, condition: Condition, boxes=None, gains=None, falloff=None, ground_contrast=1.0
+):
     def one(args):
-        pose, time, key = args
-        image = render(world, camera, pose, condition.haze_distance, condition.sheen)
+        pose, time, key, frame_boxes, gain = args
+        image = render(world, camera, pose, condition.haze_distance, condition.sheen, frame_boxes, ground_contrast)
         if obstacles is not None:
             image = draw_obstacles(image, camera, pose, obstacles, time)
+        if gain is not None:
+            image = image * gain * falloff
         return expose(image, condition, key)
 
-    return jax.lax.map(one, (poses, times, keys), batch_size=2)
+    return jax.lax.map(one, (poses, times, keys, boxes, gains), batch_size=2)
+
+
+def _half_fov(camera: Camera, margin: float = np.radians(5.0)) -> float:
+    """Half the camera's horizontal field of view (the wider side), plus ``margin``."""
+    k = np.asarray(camera.intrinsics, float)
+    width = camera.image_shape[1]
+    return float(max(np.arctan(k[0, 2] / k[0, 0]), np.arctan((width - 1 - k[0, 2]) / k[0, 0])) + margin)
 
 
 def _condition(condition: Condition | str) -> Condition:
@@ -65,12 +88,21 @@ def make_sequence(
     seed: int = 0,
     imu_rate: float = 100.0,
     smoothing: float | None = None,
+    street: Street | None = None,
+    road_tilt: np.ndarray | None = None,
+    structures: Boxes | None = None,
 ) -> Sequence:
     """Render and simulate a drive given at evenly spaced ``frame_times`` (``T + 1`` poses,
     ``T_world_body``). The first frame only starts the IMU (block 0 of the result holds the
     samples between it and the second); the result has ``T`` frames. ``smoothing`` is the IMU
     simulator's spline penalty (``None`` for smooth procedural motion, 0.01 for recorded poses);
     the ground truth and the images follow the (smoothed) simulated motion.
+
+    With a ``street`` (:mod:`jbevo.data.synthetic.street`) the poses are taken on a level road and
+    carried onto a sloped one (``road_tilt``, ``(T + 1, 2)`` grade and banking, or the street's
+    random profile): the IMU and the truth have the whole attitude, the images the attitude
+    against the road, seen by the street's mounted camera among its structures (``structures``,
+    or placed along the drive).
     """
     frame_times = np.asarray(frame_times, float)
     body_poses = np.asarray(body_poses, float)
@@ -82,11 +114,22 @@ def make_sequence(
     if not np.allclose(interval, interval[0], rtol=1e-6) or abs(samples - round(samples)) > 1e-6:
         raise ValueError("frame_times must be evenly spaced by a whole number of IMU samples")
     s = int(round(samples))
+    render_poses = None
+    tilt, climb = np.zeros((len(frame_times), 2)), np.zeros(len(frame_times))
+    if street is not None:
+        tilt = street_tilt(street, road_tilt, body_poses, seed)
+        if tilt.shape != (len(frame_times), 2):
+            raise ValueError(f"road_tilt must have shape ({len(frame_times)}, 2), got {tilt.shape}")
+        level = body_poses
+        body_poses = tilt_onto_road(level, tilt)
+        climb = body_poses[:, 2, 3] - level[:, 2, 3]
     imu = simulate_imu(frame_times, body_poses, imu_rate, imu_noise, seed, smoothing)
     t = len(frame_times) - 1
     poses = np.tile(np.eye(4), (t, 1, 1))
     poses[:, :3, :3] = rotation_zyx(imu.frame_euler[1:])
     poses[:, :3, 3] = imu.frame_position[1:]
+    if street is not None:
+        render_poses = road_relative(poses, tilt[1:], poses[:, 2, 3] - climb[1:])
     block = (t, s)
     return render_sequence(
         world,
@@ -98,6 +141,9 @@ def make_sequence(
         imu.accel.reshape(*block, 3),
         condition,
         seed,
+        street,
+        render_poses,
+        structures,
     )
 
 
@@ -111,15 +157,36 @@ def render_sequence(
     accel: np.ndarray,
     condition: Condition | str = "day",
     seed: int = 0,
+    street: Street | None = None,
+    render_poses: np.ndarray | None = None,
+    structures: Boxes | None = None,
 ) -> Sequence:
     """A Sequence whose images are rendered at ``poses`` (``T``, the frames of ``frame_times[1:]``;
-    ``frame_times[0]`` is the time the IMU starts) with the given IMU blocks ``(T, S)``."""
+    ``frame_times[0]`` is the time the IMU starts) with the given IMU blocks ``(T, S)``; the
+    images at ``render_poses`` where given (the camera against the road, where the truth
+    ``poses`` are against gravity). A ``street`` renders with its mounted camera, ``height_error``
+    higher, among its structures (``structures``, or placed along the drive from ``seed``), with
+    its exposure and vignetting; the sequence keeps ``camera``."""
     condition = _condition(condition)
     t = len(poses)
-    obstacles = place_obstacles(poses, condition.obstacles, seed) if condition.obstacles else None
+    view = np.array(poses if render_poses is None else render_poses, float)
+    if view.shape != (t, 4, 4):
+        raise ValueError(f"render_poses must have shape {(t, 4, 4)}, got {view.shape}")
+    obstacles = place_obstacles(view, condition.obstacles, seed) if condition.obstacles else None
     keys = jax.random.split(jax.random.PRNGKey(seed), t)
     times = jnp.asarray(frame_times[1:] - frame_times[0], jnp.float32)
-    images = _frames(world, camera, jnp.asarray(poses, jnp.float32), times, obstacles, keys, condition)
+    look, boxes, gains, falloff = camera, None, None, None
+    if street is not None:
+        look = mounted_camera(camera, street)
+        view[:, 2, 3] += street.height_error
+        placed = place_structures(view, street, seed) if structures is None else structures
+        boxes = jax.tree_util.tree_map(jnp.asarray, nearest_boxes(placed, view, _half_fov(camera)))
+        gains = jnp.asarray(exposure_gains(t, street, seed))
+        falloff = vignette(camera, street.vignetting)
+    contrast = 1.0 if street is None else street.ground_contrast
+    images = _frames(
+        world, look, jnp.asarray(view, jnp.float32), times, obstacles, keys, condition, boxes, gains, falloff, contrast
+    )
     seq = Sequence(
         images=images,
         frame_times=jnp.asarray(frame_times[1:], jnp.float32),
@@ -140,12 +207,14 @@ def procedural_sequence(
     condition: Condition | str = "day",
     imu_noise: ImuNoise = ADIS16448,
     world: World | None = None,
+    street: Street | None = None,
 ) -> Sequence:
-    """A procedural drive of ``frames`` frames (10 Hz) in ``town``."""
+    """A procedural drive of ``frames`` frames (10 Hz) in ``town`` (on a ``street``: slopes,
+    structures, mounting and exposure of :mod:`jbevo.data.synthetic.street`)."""
     world = World.create(town) if world is None else world
     camera = small_camera() if camera is None else camera
     times, poses = procedural_drive(seed, frames + 1)
-    return make_sequence(world, camera, times, poses, condition, imu_noise, seed)
+    return make_sequence(world, camera, times, poses, condition, imu_noise, seed, street=street)
 
 
 def kitti_sequence(
@@ -159,6 +228,7 @@ def kitti_sequence(
     seed: int = 0,
     world: World | None = None,
     real_imu: CalibratedImuDrive | None = None,
+    street: Street | None = None,
 ) -> Sequence:
     """The synthetic world driven by real KITTI motion (``T_world_cam0`` poses, e.g. read with
     :func:`jbevo.data.pose_files.read_kitti`): frames ``[start, start + frames)`` (all by default).
@@ -168,7 +238,11 @@ def kitti_sequence(
     rendered at the attitude it sees: the levelled ground truth's pitch and roll (the road's grade
     and banking included) and heading, the x, y of the truth and :func:`kitti_drive`'s height, on
     the real frame times; without it the IMU is simulated (``imu_noise``) from the level-road
-    motion of :func:`kitti_drive`."""
+    motion of :func:`kitti_drive`.
+
+    On a ``street`` the road's grade and banking are the drive's own (the low-pass of its pitch
+    and roll, :func:`~jbevo.data.synthetic.street.recorded_road_tilt`): the truth and the IMU keep
+    them, the images are rendered against the road (see :func:`make_sequence`)."""
     world = World.create(town) if world is None else world
     camera = Camera.kitti() if camera is None else camera
     times, poses = kitti_drive(kitti_poses)
@@ -176,12 +250,28 @@ def kitti_sequence(
     if start < 0 or stop > len(poses) or stop - start < 2:
         raise ValueError(f"frames [{start}, {stop - 1}) do not fit a trajectory of {len(poses)} poses (one extra starts the IMU)")
     if real_imu is None:
-        return make_sequence(world, camera, times[start:stop], poses[start:stop], condition, imu_noise, seed, smoothing=0.01)
+        tilt = None if street is None else recorded_road_tilt(body_poses_from_kitti(np.asarray(kitti_poses, float)))[start:stop]
+        return make_sequence(
+            world,
+            camera,
+            times[start:stop],
+            poses[start:stop],
+            condition,
+            imu_noise,
+            seed,
+            smoothing=0.01,
+            street=street,
+            road_tilt=tilt,
+        )
     if len(real_imu.frame_times) != len(poses):
         raise ValueError(f"the real IMU drive has {len(real_imu.frame_times)} frames, the poses {len(poses)}")
     rendered = np.array(real_imu.body_poses)
     rendered[:, 2, 3] = poses[:, 2, 3]
     frames_kept = slice(start + 1, stop)
+    against_road = None
+    if street is not None:
+        tilt = street_tilt(street, recorded_road_tilt(real_imu.body_poses), rendered, seed)
+        against_road = road_relative(rendered, tilt, poses[:, 2, 3])[frames_kept]
     return render_sequence(
         world,
         camera,
@@ -192,14 +282,61 @@ def kitti_sequence(
         real_imu.accel[frames_kept],
         condition,
         seed,
+        street,
+        against_road,
     )
 
 
-def builtin_dataset(frames: int = 120, sequences: int = 6, town: str = "town01", seed: int = 0) -> list[Sequence]:
+def synthetic_copy(
+    seq: Sequence, world: World, street: Street | None = None, condition: Condition | str = "day", seed: int = 0
+) -> Sequence:
+    """``seq`` (e.g. a real drive) with its images replaced by the synthetic world's: the same
+    frame times, IMU, camera and truth (``seq.poses``, against gravity; NaN poses are refused).
+    In the flat world (``street=None``) the camera is rendered at the truth's attitude over a
+    level plane at the camera's nominal height; on a ``street`` at the attitude against the road
+    (the truth's pitch and roll less the road's grade and banking: their 2 s low-pass less its
+    mean over the drive, the mean being taken as the camera's own mounting), with the street's
+    structures, mounting and exposure."""
+    truth = np.asarray(seq.poses, float)
+    if not np.all(np.isfinite(truth)):
+        raise ValueError("synthetic_copy needs a sequence whose every pose is known (seq.poses has NaN)")
+    times = np.asarray(seq.frame_times, float)
+    step = float(np.median(np.diff(times))) if len(times) > 1 else 0.1
+    height = float(seq.camera.height)
+    recorded = recorded_road_tilt(truth)
+    recorded = recorded - recorded.mean(0)  # the run's mean attitude is the camera's own (its mounting)
+    tilt = np.zeros((len(truth), 2)) if street is None else street_tilt(street, recorded, truth, seed)
+    view = road_relative(truth, tilt, height)
+    return render_sequence(
+        world,
+        seq.camera,
+        np.r_[times[0] - step, times],
+        truth,
+        np.asarray(seq.imu_times),
+        np.asarray(seq.gyro),
+        np.asarray(seq.accel),
+        condition,
+        seed,
+        street,
+        view,
+    )
+
+
+def builtin_dataset(
+    frames: int = 120, sequences: int = 6, town: str = "town01", seed: int = 0, street: Street | None = None
+) -> list[Sequence]:
     """The embedded default dataset: ``sequences`` procedural drives of ``frames`` frames, small
-    camera, ADIS16448 IMU, day; seeds ``seed, seed + 1, ...``."""
+    camera, ADIS16448 IMU, day; seeds ``seed, seed + 1, ...`` (on a ``street`` where given)."""
     world = World.create(town)
-    return [procedural_sequence(seed + i, frames, town, world=world) for i in range(sequences)]
+    return [procedural_sequence(seed + i, frames, town, world=world, street=street) for i in range(sequences)]
 
 
-__all__ = ["builtin_dataset", "kitti_sequence", "make_sequence", "procedural_sequence", "render_sequence", "small_camera"]
+__all__ = [
+    "builtin_dataset",
+    "kitti_sequence",
+    "make_sequence",
+    "procedural_sequence",
+    "render_sequence",
+    "small_camera",
+    "synthetic_copy",
+]

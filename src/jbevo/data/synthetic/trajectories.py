@@ -11,6 +11,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from jbevo.data.kitti_frames import CAMERA_HEIGHT, body_poses_from_kitti
+from jbevo.data.synthetic.street import recorded_road_tilt
 from jbevo.geometry.euler import euler_zyx, poses_from_euler
 
 
@@ -123,8 +124,7 @@ def kitti_drive(
         raise ValueError(f"kitti_poses must have shape (N >= 2, 4, 4), got {kitti_poses.shape}")
     body = body_poses_from_kitti(kitti_poses)
     euler = euler_zyx(body[:, :3, :3])
-    sigma = grade_window_s * frame_rate
-    euler[:, 1:] -= gaussian_filter1d(euler[:, 1:], sigma, axis=0, mode="nearest")
+    euler[:, 1:] -= recorded_road_tilt(body, frame_rate, grade_window_s)
     z = body[:, 2, 3] - gaussian_filter1d(body[:, 2, 3], height_window_s * frame_rate, mode="nearest") + height
     position = np.stack([body[:, 0, 3], body[:, 1, 3], z], -1)
     return np.arange(len(body)) / frame_rate, poses_from_euler(euler, position)
