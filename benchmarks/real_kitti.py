@@ -199,11 +199,13 @@ class Trainer:
         self.static = static
 
 
-def fit(trainer: Trainer, train: sq.Sequence, steps: int, seed: int, window: int, batch: int) -> Bevo:
+def fit(trainer: Trainer, train: sq.Sequence | list[sq.Sequence], steps: int, seed: int, window: int, batch: int) -> Bevo:
     """``steps`` steps (fixed in advance) of ``trainer`` from its starting parameters over
-    batches of ``batch`` random ``window``-frame windows of ``train``."""
+    batches of ``batch`` random ``window``-frame windows of ``train`` (one sequence or several
+    with the same camera)."""
     params, step = trainer.params, trainer.step
-    windows = sq.windows(train, window, 1)
+    parts = [sq.windows(s, window, 1) for s in (train if isinstance(train, list) else [train])]
+    windows = jax.tree_util.tree_map(lambda *x: jnp.concatenate(x), *parts)
     rng = np.random.default_rng(seed)
     opt_state = trainer.optimizer.init(params)
     count = windows.frame_times.shape[0]

@@ -798,6 +798,61 @@ def real_kitti_learned() -> str:
     return table(header, rows)
 
 
+# ----------------------------------------------------------------------------- the street world
+
+STREET_WORLD = "benchmarks/results/street_world.json"
+
+
+def _ratio_final(m: dict) -> str:
+    return f"{m['distance_ratio']:.3f} / {m['final_pct']:.1f} %"
+
+
+def street_world_signature() -> str:
+    runs = record(STREET_WORLD)["runs"]
+    models = ("BEVO, true attitude", "street + robust bands")
+    header = ["world (distance ratio / final error)"] + [f"{run}: {model}" for model in models for run in ("06", "07")]
+    rows = [
+        [world] + [_ratio_final(runs[run][world][model]) for model in models for run in ("06", "07")]
+        for world in sorted(runs["06"], key=lambda w: (w != "real frames", w == "flat world", w))
+    ]
+    return table(header, rows)
+
+
+def street_world_models() -> str:
+    runs = record(STREET_WORLD)["runs"]
+    worlds = ("real frames", "street world", "flat world")
+    header = ["model (distance ratio / final error)"] + [f"{run}, {world}" for run in ("06", "07") for world in worlds]
+    rows = [
+        [model] + [_ratio_final(runs[run][world][model]) for run in ("06", "07") for world in worlds]
+        for model in runs["06"]["real frames"]
+    ]
+    return table(header, rows)
+
+
+def street_world_zero_shot() -> str:
+    d = record(STREET_WORLD)
+    real = record(REAL_KITTI)["runs"]
+    keys = ["06", "06 second half", "07", "07 second half"]
+    seeds = d["settings"]["seeds"]
+    rows = [
+        ["street + robust bands, hand-set"] + [_metric(real[k]["street + robust bands"], "final_pct", 2) for k in keys],
+        [f"street + robust bands, learned in the street world only ({seeds} seeds)"]
+        + [_metric(d["zero_shot"][k], "final_pct", 2) for k in keys],
+    ]
+    for name in ("street + robust bands, learned",):
+        rows.append([f"{name} on the other half of the run (real_kitti.json)"] + [_metric(real[k].get(name), "final_pct", 2) for k in keys])
+    return table(["final error on the real frames (%)", "06", "06, 2nd half", "07", "07, 2nd half"], rows)
+
+
+def street_world_zero_shot_parameters() -> str:
+    p = record(STREET_WORLD)["zero_shot_parameters"]
+    v = {k: [x[k] for x in p] for k in p[0]}
+    return (
+        f"camera pitch {spread(v['camera_pitch_deg'], 2)} deg, roll {spread(v['camera_roll_deg'], 2)} deg, "
+        f"height scale {spread(v['height_scale'], 3)}"
+    )
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
@@ -829,6 +884,9 @@ TABLES: dict[str, Callable[[], str]] = {
     "reference_metrics": reference_metrics,
     "real_kitti_headline": real_kitti_headline,
     "real_kitti_learned": real_kitti_learned,
+    "street_world_signature": street_world_signature,
+    "street_world_models": street_world_models,
+    "street_world_zero_shot": street_world_zero_shot,
     **{
         f"real_kitti_{run.replace(' ', '_')}": (lambda run=run: real_kitti(run))
         for run in ("06", "06 first half", "06 second half", "07", "07 first half", "07 second half")
@@ -846,4 +904,5 @@ VALUES: dict[str, Callable[[], str]] = {
     "kitti_wins": kitti_wins,
     "kitti_wins_real_imu": lambda: kitti_wins(KITTI_REAL_IMU),
     "localization_wins": localization_wins,
+    "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
 }
