@@ -14,9 +14,15 @@ run whole from a warm start, as the test runs. The test sequences 09 and 10 are 
 every variant from the true attitude and speed at frame 0 (the devkit's trajectories start
 together), and scored with the devkit (100-800 m; 09+10 pools both sequences' segments).
 Variants: BEVO learned (each seed), BEVO hand-set with and without bands, DPC with zero
-pitch/roll (no IMU) with and without bands, accelerometer-only attitude, and the true attitude
-(an upper bound). Writes ``experiments/results/kitti_odometry.json`` (``kitti_odometry_real_imu.json``
-with the real IMU) and a trajectory figure per test sequence.
+pitch/roll (no IMU) with and without bands, accelerometer-only attitude, the true attitude
+(an upper bound) and the street preset (:func:`jbevo.models.presets.street_model`, hand-set).
+``--world street`` renders every sequence in the street world (:mod:`jbevo.data.synthetic.street`:
+structures beside the road, the drive's own grade and banking, a camera mounted off its nominal
+pose, exposure changes and vignetting). Writes ``experiments/results/kitti_odometry.json``
+(``_real_imu`` with the real IMU, ``_street`` in the street world) and a trajectory figure per
+sequence, 00-10: the test sequences whole, the training and validation sequences over the
+frames the first seed trained or validated on, as rendered for it (their scores under
+``training_sequences``).
 """
 
 from __future__ import annotations
@@ -33,6 +39,7 @@ import numpy as np
 
 from jbevo.cli import train
 from jbevo.data.catalog import load_sequences
+from jbevo.data.synthetic.street import WORLDS
 from jbevo.eval.batch import run_many
 from jbevo.eval.devkit import SEGMENT_LENGTHS
 from jbevo.eval.plots import trajectory_top_view
@@ -40,6 +47,7 @@ from jbevo.eval.scores import score
 from jbevo.files import write_json_atomic
 from jbevo.geometry import BevGrid
 from jbevo.models import Bevo
+from jbevo.models.presets import street_model
 from jbevo.training import checkpoint
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -55,11 +63,11 @@ HAND_SET = {
 }
 
 
-def scores(model: Bevo, seqs) -> dict:
+def scores(model: Bevo, seqs, names=TEST) -> dict:
     outs, fps = run_many(model, seqs, warm_start=True)
     row = {
         name: {k: score(o, s, SEGMENT_LENGTHS)[k] for k in ("t_err_pct", "r_err_deg_per_100m", "ate_m")}
-        for name, o, s in zip(TEST, outs, seqs)
+        for name, o, s in zip(names, outs, seqs)
     }
     pooled = score(outs, seqs, SEGMENT_LENGTHS)
     row["pooled"] = {k: pooled[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
@@ -82,6 +90,12 @@ def main(argv=None) -> int:
         help="the synthetic world with the real KITTI IMU (reference kitti_odom/imu, calibrated per day on 00-08; 03 has none: "
         "not trained on); writes kitti_odometry_real_imu.json",
     )
+    p.add_argument(
+        "--world",
+        choices=sorted(WORLDS),
+        default="flat",
+        help="the synthetic world: flat, or street (structures, slopes, camera mounting, exposure; records *_street.json)",
+    )
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--epochs", type=int, default=3)
     p.add_argument("--frames", type=int, default=500, help="training and validation frames per sequence (0: all)")
@@ -98,11 +112,14 @@ def main(argv=None) -> int:
     if args.kitti_imu:
         source += ["--kitti-imu", str(args.kitti_imu)]
     fit = [f"{i:02d}" for i in range(8) if not (args.kitti_imu and i == 3)]
-    record = "kitti_odometry_real_imu" if args.kitti_imu else "kitti_odometry"
+    record = ("kitti_odometry_real_imu" if args.kitti_imu else "kitti_odometry") + ("_street" if args.world == "street" else "")
+    source += ["--world", args.world]
     grid = BevGrid(0.1, (256, 256), near=4.0)
 
     learned, training = {}, {}
-    seqs = load_sequences(dataset, list(TEST), 0, poses, args.kitti_root, "kitti", seed=900, kitti_imu=args.kitti_imu)
+    seqs = load_sequences(
+        dataset, list(TEST), 0, poses, args.kitti_root, "kitti", seed=900, kitti_imu=args.kitti_imu, world=args.world
+    )
     for seed in args.seeds:
         run = args.out / f"{record}_run" / f"seed{seed}"
         t0 = time.perf_counter()
@@ -151,21 +168,29 @@ def main(argv=None) -> int:
         learned[str(seed)] = scores(checkpoint.load_model(run / "best.ckpt", Bevo), seqs)
         print("learned", seed, {k: v for k, v in learned[str(seed)].items() if k != "_outputs"})
     hand = {}
-    for label, (attitude, bands) in HAND_SET.items():
-        hand[label] = scores(dataclasses.replace(Bevo.create(grid, seqs[0].imu_dt, bands=bands), attitude_source=attitude), seqs)
+    models = hand_set_models(grid, seqs[0].imu_dt)
+    for label, model in models.items():
+        hand[label] = scores(model, seqs)
         print(label, {k: v for k, v in hand[label].items() if k != "_outputs"})
-    for i, name in enumerate(TEST):
-        curves = {f"BEVO learned (seed {args.seeds[0]})": learned[str(args.seeds[0])]["_outputs"][i]}
-        curves |= {
-            label: hand[label]["_outputs"][i]
-            for label in ("BEVO hand-set", "BEVO hand-set without bands", "true attitude (upper bound)")
-        }
-        trajectory_top_view(
-            args.out / f"{record}_{name}.png",
-            np.asarray(seqs[i].planar),
-            {k: np.asarray(v.poses) for k, v in curves.items()},
-            title=f"sequence {name} ({dataset}{', real IMU' if args.kitti_imu else ''})",
+    first = str(args.seeds[0])
+    learned_model = checkpoint.load_model(args.out / f"{record}_run" / f"seed{first}" / "best.ckpt", Bevo)
+    drawn = {
+        f"BEVO learned (seed {first})": learned_model,
+        **{label: models[label] for label in ("BEVO hand-set", "BEVO hand-set without bands", "true attitude (upper bound)")},
+    }
+    title = f"({dataset}{', real IMU' if args.kitti_imu else ''}{', street world' if args.world == 'street' else ''})"
+    draw(args.out / record, seqs, list(TEST), {label: hand_or(label, learned[first], hand) for label in drawn}, title)
+    # The training and validation sequences as the first seed trained on them (its rendering).
+    seen_scores: dict[str, dict] = {}
+    for names, seed in ((fit, args.seeds[0]), (["08"], args.seeds[0] + 100)):
+        part = load_sequences(
+            dataset, names, args.frames, poses, args.kitti_root, "kitti", seed=seed, kitti_imu=args.kitti_imu, world=args.world
         )
+        rows = {label: scores(model, part, names) for label, model in drawn.items()}
+        draw(args.out / record, part, names, rows, title + ", the frames trained or validated on")
+        for label, row in rows.items():
+            seen_scores.setdefault(label, {}).update({n: row[n] for n in names})
+        del part
     strip = lambda rows: {k: {kk: vv for kk, vv in v.items() if kk != "_outputs"} for k, v in rows.items()}
     write_json_atomic(
         args.out / f"{record}.json",
@@ -183,9 +208,36 @@ def main(argv=None) -> int:
             "learned": strip(learned),
             "hand_set": strip(hand),
             "training": training,
+            "world": args.world,
+            "training_sequences": seen_scores,
         },
     )
     return 0
+
+
+def hand_set_models(grid: BevGrid, imu_dt: float) -> dict[str, Bevo]:
+    """The hand-set rows (``HAND_SET``) and the street preset."""
+    models = {
+        label: dataclasses.replace(Bevo.create(grid, imu_dt, bands=bands), attitude_source=attitude)
+        for label, (attitude, bands) in HAND_SET.items()
+    }
+    return models | {"street preset (hand-set)": street_model(imu_dt, grid)}
+
+
+def hand_or(label: str, learned_row: dict, hand: dict) -> dict:
+    return learned_row if label.startswith("BEVO learned") else hand[label]
+
+
+def draw(prefix: Path, seqs, names, rows: dict[str, dict], title: str) -> None:
+    """One top view per sequence (``<prefix>_<name>.png``), the legend below the axes."""
+    for i, name in enumerate(names):
+        trajectory_top_view(
+            f"{prefix}_{name}.png",
+            np.asarray(seqs[i].planar),
+            {label: np.asarray(row["_outputs"][i].poses) for label, row in rows.items()},
+            title=f"sequence {name} {title}",
+            legend_below=True,
+        )
 
 
 if __name__ == "__main__":

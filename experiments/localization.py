@@ -6,13 +6,16 @@ quarters (the first two train, the third validates, the last tests):
 * AeroGround-style: a ground robot's front camera on a map rendered from a drone's viewpoint;
   trained in town01, tested in town02 under the same three conditions.
 
-    python experiments/localization.py [--seeds 0 1 2] [--epochs 3] [--kinds carla aeroground]
+    python experiments/localization.py [--seeds 0 1 2] [--epochs 3] [--kinds carla aeroground] [--world street]
 
 For each kind and training seed (the training drive and the shuffling): ``python -m jbevo.localize
 train`` (checkpoint selection on the validation quarter, the hand-set parameters included), then
 ``evaluate`` on the test quarter of drive 0 in town02; BEVO+ hand-set, BEVO odometry alone and
 map matching alone are evaluated once. Writes ``experiments/results/localization.json`` and the
-trajectory figures ``experiments/results/localization_<kind>_<condition>.png`` (the first seed).
+trajectory figures ``experiments/results/localization_<kind>_<condition>.png`` (the first seed);
+with ``--world street`` every scene is in the street world (:mod:`jbevo.data.synthetic.street`:
+structures beside the road, on the map as their tops, slopes, a camera mounted off its nominal
+pose, exposure changes) and the names end in ``_street``.
 """
 
 from __future__ import annotations
@@ -24,13 +27,15 @@ import time
 from pathlib import Path
 
 from jbevo.cli import localize
+from jbevo.data.synthetic.street import WORLDS
 from jbevo.files import write_json_atomic
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def evaluate(kind: str, out: Path, checkpoint: Path | None = None) -> dict:
-    argv = ["evaluate", "--kind", kind, "--out", str(out)] + (["--checkpoint", str(checkpoint)] if checkpoint else [])
+def evaluate(kind: str, out: Path, world: str, checkpoint: Path | None = None) -> dict:
+    argv = ["evaluate", "--kind", kind, "--world", world, "--out", str(out)]
+    argv += ["--checkpoint", str(checkpoint)] if checkpoint else []
     return localize.evaluate(localize.build_parser().parse_args(argv))
 
 
@@ -38,14 +43,17 @@ def conditions(result: dict) -> dict:
     return {name.split("_")[2]: entry for name, entry in result["scenes"].items()}
 
 
-def run_kind(kind: str, seeds: list[int], epochs: int, out: Path) -> dict:
-    base = out / f"localization_{kind}_run"
-    hand = conditions(evaluate(kind, base / "eval_hand_set"))
+def run_kind(kind: str, seeds: list[int], epochs: int, out: Path, world: str) -> dict:
+    suffix = "_street" if world == "street" else ""
+    base = out / f"localization{suffix}_{kind}_run"
+    hand = conditions(evaluate(kind, base / "eval_hand_set", world))
     learned, training = {}, {}
     for seed in seeds:
         run = base / f"seed{seed}"
         t0 = time.perf_counter()
-        localize.main(["train", "--kind", kind, "--epochs", str(epochs), "--seed", str(seed), "--out", str(run)])
+        localize.main(
+            ["train", "--kind", kind, "--world", world, "--epochs", str(epochs), "--seed", str(seed), "--out", str(run)]
+        )
         metrics = json.loads((run / "metrics.json").read_text())
         training[str(seed)] = {
             "seconds": time.perf_counter() - t0,
@@ -53,13 +61,13 @@ def run_kind(kind: str, seeds: list[int], epochs: int, out: Path) -> dict:
             "validation_hand_set": metrics["before"],
             "validation_learned": metrics["after"],
         }
-        result = evaluate(kind, run / "eval", run)
+        result = evaluate(kind, run / "eval", world, run)
         learned[str(seed)] = {c: e["BEVO+"] for c, e in conditions(result).items()}
         learned[str(seed)]["frames_per_s"] = result["frames_per_s"]
         if seed == seeds[0]:
             for name in result["scenes"]:
                 condition = name.split("_")[2]
-                shutil.copyfile(run / "eval" / "plots" / f"{name}.png", out / f"localization_{kind}_{condition}.png")
+                shutil.copyfile(run / "eval" / "plots" / f"{name}.png", out / f"localization{suffix}_{kind}_{condition}.png")
     return {
         "hand_set": {c: e["BEVO+"] for c, e in hand.items()},
         "odometry_alone": {c: e["BEVO odometry"] for c, e in hand.items()},
@@ -74,14 +82,16 @@ def main(argv=None) -> int:
     p.add_argument("--kinds", nargs="+", default=["carla", "aeroground"])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--epochs", type=int, default=3)
+    p.add_argument("--world", choices=sorted(WORLDS), default="flat", help="the synthetic world: flat or street")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    results = {kind: run_kind(kind, args.seeds, args.epochs, args.out) for kind in args.kinds}
+    results = {kind: run_kind(kind, args.seeds, args.epochs, args.out, args.world) for kind in args.kinds}
     write_json_atomic(
-        args.out / "localization.json",
+        args.out / f"localization{'_street' if args.world == 'street' else ''}.json",
         {
+            "world": args.world,
             "train": "town01, day, quarters 1-2 of drive S (selection on quarter 3)",
             "test": "town02, quarter 4 of drive 0",
             "epochs": args.epochs,

@@ -17,12 +17,15 @@ python benchmarks/scaling.py
 python benchmarks/attitude.py
 python benchmarks/attitude_real.py
 python benchmarks/real_kitti.py
+python benchmarks/street_world.py
 python experiments/filtering_demo.py
 python experiments/reference_metrics.py
 python experiments/bands.py
 python experiments/builtin_training.py
 python experiments/kitti_odometry.py
 python experiments/kitti_odometry.py --real-imu
+python experiments/kitti_odometry.py --world street
 python experiments/localization.py
+python experiments/localization.py --world street
 python experiments/localization_smoothing.py
 python docs/build.py

@@ -32,6 +32,14 @@ def test_train_resume_and_evaluate(tmp_path, capsys):
     assert (ev / "plots" / f"{name}.png").is_file() and (ev / "poses" / f"{name}_bevo_plus.txt").is_file()
     assert (ev / "poses" / f"{name}_bevo_plus_smoothed.txt").is_file()
 
+    # The same checkpoint in the street world: it runs, and says which world it ran in.
+    street = tmp_path / "eval_street"
+    args = ["evaluate", *small, "--checkpoint", str(out), "--conditions", "day", "--world", "street", "--out", str(street)]
+    assert main(args) == 0
+    result = json.loads((street / "metrics.json").read_text())
+    assert result["world"] == "street" and len(result["scenes"]) == 1
+    assert all(e["BEVO+"]["mean_position_error_m"] < 5.0 for e in result["scenes"].values())
+
 
 def test_errors_name_what_is_wrong_and_exit_with_1(tmp_path, capsys):
     bad = tmp_path / "bad.ckpt"
