@@ -95,6 +95,23 @@ def test_resume_from_a_corrupt_checkpoint_fails_clearly(tmp_path, capsys):
     assert "last.ckpt is not a readable jbevo checkpoint" in err and "Traceback" not in err
 
 
+def test_the_street_model_trains_in_the_street_world_and_evaluates(tmp_path, capsys):
+    """``--model street`` trains the street preset's parts (the road view, the yaw fusion) and its
+    checkpoint brings them back to ``evaluate``; ``--world street`` renders the street world."""
+    out = tmp_path / "street"
+    assert train.main([*TINY, "--epochs", "1", "--model", "street", "--world", "street", "--out", str(out)]) == 0
+    model = checkpoint.load_model(out / "last.ckpt", Bevo)
+    assert model.road is not None and model.yaw_fusion is not None
+    assert json.loads((out / "metrics.json").read_text())["learnable_parameters"] > 14
+    ev = tmp_path / "street_eval"
+    assert evaluate.main(["--checkpoint", str(out), *EVALUATE, "--world", "street", "--out", str(ev)]) == 0
+    metrics = json.loads((ev / "metrics.json").read_text())
+    assert metrics["road_view"] and metrics["world"] == "street" and metrics["overall"]["ate_m"] >= 0
+    hand = tmp_path / "street_hand_set"
+    assert evaluate.main([*EVALUATE, "--model", "street", "--out", str(hand)]) == 0
+    assert json.loads((hand / "metrics.json").read_text())["road_view"]
+
+
 def test_evaluate_writes_poses_plots_and_metrics(evaluation):
     metrics = json.loads((evaluation / "metrics.json").read_text())
     assert list(metrics["per_sequence"]) == ["synthetic_1000", "synthetic_1001", "synthetic_1002"]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
@@ -22,6 +23,8 @@ from jbevo.data.catalog import DATASETS
 from jbevo.data.synthetic.street import WORLDS
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.bev_grid import BevGrid
+from jbevo.models.bevo import Bevo
+from jbevo.models.presets import street_model
 from jbevo.training.loop import TrainingDiverged, load_best
 
 
@@ -206,6 +209,29 @@ def dataset_options(default_frames: int) -> argparse.ArgumentParser:
     return p
 
 
+MODELS = ("bevo", "street")
+
+
+def model_option() -> argparse.ArgumentParser:
+    """A parent parser with ``--model``: BEVO as the paper has it, or the street preset."""
+    p = argparse.ArgumentParser(add_help=False)
+    p.add_argument(
+        "--model",
+        choices=MODELS,
+        default="bevo",
+        help="bevo (the paper's model) or street (jbevo.models.presets.street_model: camera against the road, road "
+        "corridor, the gyro's turn fused with DPC's; with --bands the robust bands on the road's grade)",
+    )
+    return p
+
+
+def hand_set_model(kind: str, grid: BevGrid, imu_dt: float, bands: bool, attitude: str = "filter") -> Bevo:
+    """The hand-set model of ``--model`` on ``grid``, with or without the band geometry."""
+    if kind == "street":
+        return dataclasses.replace(street_model(imu_dt, grid, bands=bands), attitude_source=attitude)
+    return Bevo.create(grid, imu_dt, attitude, bands=bands)
+
+
 def seed_option(default: int = 0, help: str = "random seed") -> argparse.ArgumentParser:
     """A parent parser with ``--seed``."""
     p = argparse.ArgumentParser(add_help=False)
@@ -290,6 +316,8 @@ __all__ = [
     "best_checkpoint",
     "check_batch",
     "dataset_options",
+    "hand_set_model",
+    "model_option",
     "distributed_options",
     "diverged_as_command_error",
     "grid_option",

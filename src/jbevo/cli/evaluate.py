@@ -45,11 +45,11 @@ from jbevo.training import checkpoint, distributed
 ATTITUDE_SOURCES = ("filter", "zero", "accel", "truth")
 
 
-def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str, bands: bool = False) -> Bevo:
-    """The hand-set model (``path`` None) or a checkpoint's (its own grid and bands), projecting
-    with ``attitude``."""
+def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str, bands: bool = False, kind: str = "bevo") -> Bevo:
+    """The hand-set model of ``kind`` (``path`` None; :func:`jbevo.cli.common.hand_set_model`) or a
+    checkpoint's (its own grid, bands and parts), projecting with ``attitude``."""
     if path is None:
-        return Bevo.create(grid, imu_dt, attitude, bands=bands)
+        return common.hand_set_model(kind, grid, imu_dt, bands, attitude)
     return dataclasses.replace(checkpoint.load_model(path, Bevo), attitude_source=attitude)
 
 
@@ -63,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
             common.grid_option(BevGrid(0.1, (128, 128), near=7.5)),
             common.seed_option(1000, "first seed of the synthetic drives (training uses 0..)"),
             common.distributed_options(),
+            common.model_option(),
         ],
     )
     p.add_argument("--checkpoint", type=Path, help="a checkpoint file or a training output folder (its best.ckpt)")
@@ -114,7 +115,7 @@ def evaluate(args: argparse.Namespace) -> int:
         lengths = segment_lengths(args.dataset, args.frames)
         imu_dt = seqs[0].imu_dt if np.isfinite(seqs[0].imu_dt) else 0.01
         with common.reading(f"the checkpoint {args.checkpoint}"):
-            model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands)
+            model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands, args.model)
     outputs, fps = run_many(model, seqs, args.warm_start)
     # Process 0 writes and scores every sequence: the trajectories and the truth (not the
     # images) of the others' shares come to it.
@@ -153,6 +154,8 @@ def evaluate(args: argparse.Namespace) -> int:
             "checkpoint": str(args.checkpoint) if args.checkpoint else None,
             "attitude": args.attitude,
             "bands": model.bands is not None,
+            "road_view": model.road is not None,  # the street model's parts (--model street or its checkpoint)
+            "world": args.world,
             "warm_start": args.warm_start,
             "devices": [str(d) for d in jax.devices()],
             "processes": jax.process_count(),

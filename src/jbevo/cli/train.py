@@ -45,7 +45,6 @@ from jbevo.data.sequence import Sequence
 from jbevo.eval.scores import SHORT_SEGMENTS, criterion, format_scores, segment_lengths
 from jbevo.files import write_json_atomic
 from jbevo.geometry.bev_grid import BevGrid
-from jbevo.models.bevo import Bevo
 from jbevo.models.losses import motion_loss
 from jbevo.training import distributed
 from jbevo.training.data_parallel import DataParallel
@@ -93,6 +92,7 @@ def build_parser() -> argparse.ArgumentParser:
             common.optimizer_options(lr=0.03, epochs=24, window=0, batch=4, whole=True),
             common.seed_option(),
             common.distributed_options(),
+            common.model_option(),
         ],
     )
     p.add_argument(
@@ -145,7 +145,12 @@ def train(args: argparse.Namespace) -> int:
         imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
         with common.reading(f"the run in {args.out}"):
             model, params, static, optimizer, opt_state, progress = start_run(
-                Bevo.create(args.grid, imu_dt, bands=args.bands), args.out, args.lr, args.clip, args.resume, "best_t_err_pct"
+                common.hand_set_model(args.model, args.grid, imu_dt, args.bands),
+                args.out,
+                args.lr,
+                args.clip,
+                args.resume,
+                "best_t_err_pct",
             )
             windows = training_windows(train_seqs, args.window)
         common.check_batch(parallel, args.batch, len(windows))
@@ -156,7 +161,7 @@ def train(args: argparse.Namespace) -> int:
         f"over {parallel.size} device(s) in {jax.process_count()} process(es)"
     )
 
-    hand_set = Bevo.create(model.grid, imu_dt, bands=model.bands is not None)
+    hand_set = common.hand_set_model(args.model, model.grid, imu_dt, model.bands is not None)
     val_warm = args.val_start == "warm"
     before = validate(hand_set, val_seqs, lengths, args.val_window, val_warm)
     print(f"validation before training (hand-set): {format_scores(before)}")
