@@ -583,6 +583,7 @@ def bands() -> str:
 
 KITTI_SIMULATED_IMU = "experiments/results/kitti_odometry.json"
 KITTI_REAL_IMU = "experiments/results/kitti_odometry_real_imu.json"
+KITTI_STREET = "experiments/results/kitti_odometry_street.json"
 
 
 def kitti_odometry(name: str = KITTI_SIMULATED_IMU) -> str:
@@ -630,6 +631,34 @@ def kitti_validation(name: str = KITTI_SIMULATED_IMU) -> str:
     return table(["08 (validation)", "t_err (%)", "r_err (deg/100 m)", "ATE (m)", "motion RMSE (m)"], rows)
 
 
+def kitti_worlds() -> str:
+    """The flat and the street world's pooled 09 + 10 errors side by side."""
+    flat, street = record(KITTI_SIMULATED_IMU), record(KITTI_STREET)
+
+    def learned(d: dict, key: str) -> str:
+        return spread([d["learned"][s]["pooled"][key] for s in seeds_of(d["learned"])])
+
+    def hand(d: dict, label: str, key: str) -> str:
+        return num(d["hand_set"][label]["pooled"][key]) if label in d["hand_set"] else "-"
+
+    rows = [
+        [f"BEVO learned ({len(seeds_of(street['learned']))} seeds)"]
+        + [learned(d, k) for k in ("t_err_pct", "r_err_deg_per_100m") for d in (flat, street)]
+    ]
+    for label in street["hand_set"]:
+        rows.append([label] + [hand(d, label, k) for k in ("t_err_pct", "r_err_deg_per_100m") for d in (flat, street)])
+    header = ["09 + 10 pooled", "t_err flat (%)", "t_err street (%)", "r_err flat (deg/100 m)", "r_err street (deg/100 m)"]
+    return table(header, rows)
+
+
+def kitti_training_sequences(name: str = KITTI_STREET) -> str:
+    """t_err on the frames each training and validation sequence was trained or validated on."""
+    d = record(name)["training_sequences"]
+    names = sorted(next(iter(d.values())))
+    rows = [[label] + [num(d[label][n]["t_err_pct"]) for n in names] for label in d]
+    return table(["t_err (%) on the frames trained on", *names], rows)
+
+
 def kitti_wins(name: str = KITTI_SIMULATED_IMU) -> str:
     d = record(name)
     seeds = seeds_of(d["learned"])
@@ -643,8 +672,12 @@ def kitti_wins(name: str = KITTI_SIMULATED_IMU) -> str:
 # ----------------------------------------------------------------------------- localization
 
 
-def _localization(kind: str) -> str:
-    d = record("experiments/results/localization.json")["results"][kind]
+LOCALIZATION = "experiments/results/localization.json"
+LOCALIZATION_STREET = "experiments/results/localization_street.json"
+
+
+def _localization(kind: str, name: str = LOCALIZATION) -> str:
+    d = record(name)["results"][kind]
     conditions = list(d["hand_set"])
     seeds = seeds_of(d["learned"])
     header = ["mean position error (m)", *conditions]
@@ -668,8 +701,8 @@ def localization_aeroground() -> str:
     return _localization("aeroground")
 
 
-def localization_wins() -> str:
-    results = record("experiments/results/localization.json")["results"]
+def localization_wins(name: str = LOCALIZATION) -> str:
+    results = record(name)["results"]
     parts = []
     for kind, d in results.items():
         seeds, conditions = seeds_of(d["learned"]), list(d["hand_set"])
@@ -840,7 +873,10 @@ def street_world_zero_shot() -> str:
         + [_metric(d["zero_shot"][k], "final_pct", 2) for k in keys],
     ]
     for name in ("street + robust bands, learned",):
-        rows.append([f"{name} on the other half of the run (real_kitti.json)"] + [_metric(real[k].get(name), "final_pct", 2) for k in keys])
+        rows.append(
+            [f"{name} on the other half of the run (real_kitti.json)"]
+            + [_metric(real[k].get(name), "final_pct", 2) for k in keys]
+        )
     return table(["final error on the real frames (%)", "06", "06, 2nd half", "07", "07, 2nd half"], rows)
 
 
@@ -877,6 +913,11 @@ TABLES: dict[str, Callable[[], str]] = {
     "kitti_validation": kitti_validation,
     "kitti_odometry_real_imu": lambda: kitti_odometry(KITTI_REAL_IMU),
     "kitti_validation_real_imu": lambda: kitti_validation(KITTI_REAL_IMU),
+    "kitti_odometry_street": lambda: kitti_odometry(KITTI_STREET),
+    "kitti_validation_street": lambda: kitti_validation(KITTI_STREET),
+    "kitti_worlds": kitti_worlds,
+    "kitti_training_sequences_street": kitti_training_sequences,
+    "localization_carla_street": lambda: _localization("carla", LOCALIZATION_STREET),
     "localization_carla": localization_carla,
     "localization_aeroground": localization_aeroground,
     "localization_validation": localization_validation,
@@ -903,6 +944,8 @@ VALUES: dict[str, Callable[[], str]] = {
     "builtin_wins": builtin_wins,
     "kitti_wins": kitti_wins,
     "kitti_wins_real_imu": lambda: kitti_wins(KITTI_REAL_IMU),
+    "kitti_wins_street": lambda: kitti_wins(KITTI_STREET),
+    "localization_wins_street": lambda: localization_wins(LOCALIZATION_STREET),
     "localization_wins": localization_wins,
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
 }
