@@ -683,7 +683,7 @@ def _localization(kind: str, name: str = LOCALIZATION) -> str:
     header = ["mean position error (m)", *conditions]
     rows = [
         [
-            f"BEVO+ learned ({len(seeds)} seeds)",
+            f"BEVO+ learned ({len(seeds)} seed{'s' if len(seeds) > 1 else ''})",
             *(spread([d["learned"][s][c]["mean_position_error_m"] for s in seeds], 3) for c in conditions),
         ],
         ["BEVO+ hand-set", *(num(d["hand_set"][c]["mean_position_error_m"], 3) for c in conditions)],
