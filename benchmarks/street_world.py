@@ -14,7 +14,7 @@ without bands, the street model without bands and the preset (robust bands, road
 
 Zero-shot. The preset street model learns its road view, yaw fusion, DPC and bands (14 numbers)
 on street-world drives only: the first ``--frames`` frames of KITTI 00, 02, 05 and 08's motion
-(simulated IMU, their own grade and banking; none of them is a real run scored here), ``--steps``
+(simulated IMU, the street's random grade and banking; none of them is a real run scored here), ``--steps``
 Adam steps fixed in advance, ``--seeds`` seeds, no checkpoint selection; it is then run on the
 real frames. Metrics and keys as ``real_kitti.py``: ``runs[<run>][<world>][<model>][<metric>]``
 with ``<run>`` 06, 07 and their halves, and ``zero_shot[<run>][<metric>]`` (mean, std, seeds).

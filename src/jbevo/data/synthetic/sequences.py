@@ -14,7 +14,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jbevo.data.kitti_frames import body_poses_from_kitti
 from jbevo.data.sequence import Sequence, check
 from jbevo.data.synthetic.conditions import CONDITIONS, Condition, draw_obstacles, expose, place_obstacles
 from jbevo.data.synthetic.imu import ADIS16448, ImuNoise, simulate_imu
@@ -240,9 +239,11 @@ def kitti_sequence(
     the real frame times; without it the IMU is simulated (``imu_noise``) from the level-road
     motion of :func:`kitti_drive`.
 
-    On a ``street`` the road's grade and banking are the drive's own (the low-pass of its pitch
-    and roll, :func:`~jbevo.data.synthetic.street.recorded_road_tilt`): the truth and the IMU keep
-    them, the images are rendered against the road (see :func:`make_sequence`)."""
+    On a ``street`` the road's grade and banking are the street's random profiles (a pose file's
+    pitch and roll are against its first camera pose, not gravity: their low-pass swings by
+    several degrees with the heading and is not the road's grade); with ``real_imu`` they are the
+    levelled truth's own (its low-pass). The truth and the IMU keep them, the images are rendered
+    against the road (see :func:`make_sequence`)."""
     world = World.create(town) if world is None else world
     camera = Camera.kitti() if camera is None else camera
     times, poses = kitti_drive(kitti_poses)
@@ -250,18 +251,8 @@ def kitti_sequence(
     if start < 0 or stop > len(poses) or stop - start < 2:
         raise ValueError(f"frames [{start}, {stop - 1}) do not fit a trajectory of {len(poses)} poses (one extra starts the IMU)")
     if real_imu is None:
-        tilt = None if street is None else recorded_road_tilt(body_poses_from_kitti(np.asarray(kitti_poses, float)))[start:stop]
         return make_sequence(
-            world,
-            camera,
-            times[start:stop],
-            poses[start:stop],
-            condition,
-            imu_noise,
-            seed,
-            smoothing=0.01,
-            street=street,
-            road_tilt=tilt,
+            world, camera, times[start:stop], poses[start:stop], condition, imu_noise, seed, smoothing=0.01, street=street
         )
     if len(real_imu.frame_times) != len(poses):
         raise ValueError(f"the real IMU drive has {len(real_imu.frame_times)} frames, the poses {len(poses)}")
