@@ -659,7 +659,7 @@ def kitti_training_sequences(name: str = KITTI_STREET) -> str:
     d = record(name)["training_sequences"]
     names = sorted(next(iter(d.values())))
     rows = [[label] + [num(d[label][n]["t_err_pct"]) for n in names] for label in d]
-    return table(["t_err (%) on the frames trained on", *names], rows)
+    return table(["t_err (%) over the training and validation frames", *names], rows)
 
 
 def kitti_wins(name: str = KITTI_SIMULATED_IMU) -> str:
