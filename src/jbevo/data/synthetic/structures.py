@@ -181,8 +181,8 @@ def nearest_boxes(boxes: Boxes, poses: np.ndarray, half_fov: float = np.pi / 2, 
         pad = k - order.shape[1]
         out = [np.concatenate([x, np.zeros((t, pad, *x.shape[2:]))], 1) for x in out]
         valid = np.concatenate([valid, np.zeros((t, pad))], 1)
-    out[-1] = valid
-    return Boxes(*(x.astype(np.float32) for x in out))
+    chosen_boxes = Boxes(*out)._replace(valid=valid)
+    return Boxes(*(x.astype(np.float32) for x in chosen_boxes))
 
 
 def _slab(o, inv_d, lo, hi):
