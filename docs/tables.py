@@ -885,6 +885,10 @@ def street_world_zero_shot() -> str:
     return table(["final error on the real frames (%)", "06", "06, 2nd half", "07", "07, 2nd half"], rows)
 
 
+def street_world_minutes() -> str:
+    return f"{record(STREET_WORLD)['seconds'] / 60:.0f}"
+
+
 def street_world_zero_shot_parameters() -> str:
     p = record(STREET_WORLD)["zero_shot_parameters"]
     v = {k: [x[k] for x in p] for k in p[0]}
@@ -953,4 +957,5 @@ VALUES: dict[str, Callable[[], str]] = {
     "localization_wins_street": lambda: localization_wins(LOCALIZATION_STREET),
     "localization_wins": localization_wins,
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
+    "street_world_minutes": street_world_minutes,
 }
