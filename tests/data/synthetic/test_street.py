@@ -15,7 +15,7 @@ from jbevo.data.synthetic.imu import NOISELESS
 from jbevo.data.synthetic.maps import render_map
 from jbevo.data.synthetic.render import render
 from jbevo.data.synthetic.scenes import scene
-from jbevo.data.synthetic.sequences import make_sequence, procedural_sequence, small_camera, synthetic_copy
+from jbevo.data.synthetic.sequences import frame_rate, make_sequence, procedural_sequence, small_camera, synthetic_copy
 from jbevo.data.synthetic.street import (
     STREET,
     Street,
@@ -183,6 +183,19 @@ def test_a_synthetic_copy_keeps_the_drive_and_replaces_the_images(world):
     broken = eqx.tree_at(lambda s: s.poses, source, source.poses.at[3, 0, 3].set(jnp.nan))
     with pytest.raises(ValueError, match="NaN"):
         synthetic_copy(broken, world)
+
+
+def test_a_copy_takes_the_frame_rate_of_its_drive():
+    # KITTI's camera runs at 9.6 Hz, not 10: the road's 2 s low-pass and the exposure's 1.5 s
+    # walk are set in seconds, so their width in frames follows the drive's own rate.
+    kitti_like = 0.1038752 * np.arange(50)
+    assert frame_rate(kitti_like) == pytest.approx(1 / 0.1038752)
+    assert frame_rate(0.05 * np.arange(5)) == pytest.approx(20.0)
+    assert frame_rate(np.array([3.0])) == 10.0
+    with pytest.raises(ValueError, match="increase"):
+        frame_rate(np.array([1.0, 1.0, 1.0]))
+    slow, fast = exposure_gains(400, STREET, 0, frame_rate=5.0), exposure_gains(400, STREET, 0, frame_rate=20.0)
+    assert np.abs(np.diff(np.log(slow))).mean() > 2 * np.abs(np.diff(np.log(fast))).mean()
 
 
 def test_the_map_shows_the_tops_of_the_structures(world):

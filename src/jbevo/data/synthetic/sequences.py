@@ -180,7 +180,7 @@ def render_sequence(
         view[:, 2, 3] += street.height_error
         placed = place_structures(view, street, seed) if structures is None else structures
         boxes = jax.tree_util.tree_map(jnp.asarray, nearest_boxes(placed, view, _half_fov(camera)))
-        gains = jnp.asarray(exposure_gains(t, street, seed))
+        gains = jnp.asarray(exposure_gains(t, street, seed, frame_rate(frame_times)))
         falloff = vignette(camera, street.vignetting)
     contrast = 1.0 if street is None else street.ground_contrast
     images = _frames(
@@ -261,7 +261,8 @@ def kitti_sequence(
     frames_kept = slice(start + 1, stop)
     against_road = None
     if street is not None:
-        tilt = street_tilt(street, recorded_road_tilt(real_imu.body_poses), rendered, seed)
+        recorded = recorded_road_tilt(real_imu.body_poses, frame_rate(real_imu.frame_times))
+        tilt = street_tilt(street, recorded, rendered, seed)
         against_road = road_relative(rendered, tilt, poses[:, 2, 3])[frames_kept]
     return render_sequence(
         world,
@@ -278,6 +279,18 @@ def kitti_sequence(
     )
 
 
+def frame_rate(frame_times: np.ndarray, default: float = 10.0) -> float:
+    """Frames per second of ``frame_times`` (the median step's inverse; ``default`` for fewer than
+    two frames)."""
+    times = np.asarray(frame_times, float)
+    if len(times) < 2:
+        return default
+    step = float(np.median(np.diff(times)))
+    if not step > 0:
+        raise ValueError(f"frame times must increase, got a median step of {step} s")
+    return 1.0 / step
+
+
 def synthetic_copy(
     seq: Sequence, world: World, street: Street | None = None, condition: Condition | str = "day", seed: int = 0
 ) -> Sequence:
@@ -292,9 +305,9 @@ def synthetic_copy(
     if not np.all(np.isfinite(truth)):
         raise ValueError("synthetic_copy needs a sequence whose every pose is known (seq.poses has NaN)")
     times = np.asarray(seq.frame_times, float)
-    step = float(np.median(np.diff(times))) if len(times) > 1 else 0.1
+    step = 1.0 / frame_rate(times)
     height = float(seq.camera.height)
-    recorded = recorded_road_tilt(truth)
+    recorded = recorded_road_tilt(truth, frame_rate(times))
     recorded = recorded - recorded.mean(0)  # the run's mean attitude is the camera's own (its mounting)
     tilt = np.zeros((len(truth), 2)) if street is None else street_tilt(street, recorded, truth, seed)
     view = road_relative(truth, tilt, height)
