@@ -40,6 +40,14 @@ def test_train_resume_and_evaluate(tmp_path, capsys):
     assert result["world"] == "street" and len(result["scenes"]) == 1
     assert all(e["BEVO+"]["mean_position_error_m"] < 5.0 for e in result["scenes"].values())
 
+    # The hand-set start with the street preset's odometry (road view, yaw fusion).
+    preset = tmp_path / "eval_preset"
+    args = ["evaluate", *small, "--model", "street", "--conditions", "day", "--world", "street", "--out", str(preset)]
+    assert main(args) == 0
+    result = json.loads((preset / "metrics.json").read_text())
+    assert result["model"] == "street" and result["world"] == "street"
+    assert all(e["BEVO+"]["mean_position_error_m"] < 5.0 for e in result["scenes"].values())
+
 
 def test_errors_name_what_is_wrong_and_exit_with_1(tmp_path, capsys):
     bad = tmp_path / "bad.ckpt"

@@ -95,7 +95,12 @@ def train(args: argparse.Namespace) -> int:
             val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames, street)
         with common.reading(f"the run in {args.out}"):
             model, params, static, optimizer, opt_state, progress_ = start_run(
-                localization_model(args.kind), args.out, args.lr, args.clip, args.resume, "best_mean_position_error_m"
+                localization_model(args.kind, args.model == "street"),
+                args.out,
+                args.lr,
+                args.clip,
+                args.resume,
+                "best_mean_position_error_m",
             )
         seq = train_scene.sequence
         if seq.num_frames < args.window:
@@ -106,7 +111,7 @@ def train(args: argparse.Namespace) -> int:
         f"BEVO+: {model.num_learnable()} learnable parameters; {args.kind} scene in {args.town} ({args.condition}): "
         f"{train_scene.sequence.num_frames} training and {val_scene.sequence.num_frames} validation frames"
     )
-    before = validate_localization(localization_model(args.kind), val_scene.sequence, val_scene.map)
+    before = validate_localization(localization_model(args.kind, args.model == "street"), val_scene.sequence, val_scene.map)
     _print("validation before training (hand-set)", before)
     if progress_["epoch"] == 0:
         # The hand-set parameters are the first candidate: a learned checkpoint replaces them
@@ -167,7 +172,8 @@ def train(args: argparse.Namespace) -> int:
 def evaluate(args: argparse.Namespace) -> dict:
     """Localize the ``--part`` of the scene under every condition; returns the metrics written."""
     with common.reading(f"the checkpoint {args.checkpoint}"):
-        model = localization_model(args.kind) if args.checkpoint is None else checkpoint.load_model(args.checkpoint, BevoPlus)
+        hand_set = localization_model(args.kind, args.model == "street")
+        model = hand_set if args.checkpoint is None else checkpoint.load_model(args.checkpoint, BevoPlus)
     world = World.create(args.town)
     frames = args.frames or None
     with common.reading("the scene"):
@@ -214,6 +220,7 @@ def evaluate(args: argparse.Namespace) -> dict:
         "kind": args.kind,
         "town": args.town,
         "world": args.world,
+        "model": args.model if args.checkpoint is None else "checkpoint",
         "part": args.part,
     }
     write_json_atomic(args.out / "metrics.json", summary)
@@ -238,6 +245,13 @@ def build_parser() -> argparse.ArgumentParser:
         choices=sorted(WORLDS),
         default="flat",
         help="flat, or street (structures, slopes, camera mounting, exposure; the map shows the structures' tops)",
+    )
+    scene_options.add_argument(
+        "--model",
+        choices=common.MODELS,
+        default="bevo",
+        help="the hand-set start: bevo (BEVO+ as the paper has it) or street (the odometry with the street preset's road "
+        "view, whose camera attitude and height the map match uses too, and the gyro's turn fused with DPC's)",
     )
     seed = common.seed_option(0, "the drive")
     t = sub.add_parser(

@@ -16,13 +16,16 @@ from jbevo.vision.bands import BandGeometry
 GYRO_WINDOW = float(np.radians(2.0))
 
 
-def localization_model(kind: str) -> BevoPlus:
+def localization_model(kind: str, street: bool = False) -> BevoPlus:
     """The hand-set BEVO+ for a scene kind (``carla`` or ``aeroground``): its BEV grids, and the
-    odometry's rotation searched within :data:`GYRO_WINDOW` of the gyro's turn."""
+    odometry's rotation searched within :data:`GYRO_WINDOW` of the gyro's turn. With ``street`` the
+    odometry is the street preset's (:func:`street_model` without bands): the road view, whose
+    camera attitude and height the map match uses too, and the gyro's turn fused with DPC's."""
     if kind not in SCENE_KINDS:
         raise ValueError(f"unknown scene kind {kind!r}; known: {sorted(SCENE_KINDS)}")
     odometry_grid, map_grid = SCENE_KINDS[kind].grids()
-    return BevoPlus.create(Bevo.create(odometry_grid, gyro_window=GYRO_WINDOW), map_grid)
+    odometry = Bevo.create(odometry_grid, gyro_window=GYRO_WINDOW, road=street, yaw_fusion=street)
+    return BevoPlus.create(odometry, map_grid)
 
 
 #: The KITTI-size BEV of the real-street model: 256 x 256 at 0.1 m/px from 4 m ahead.
