@@ -593,7 +593,7 @@ def kitti_odometry(name: str = KITTI_SIMULATED_IMU) -> str:
     header = ["method", *(f"{t} t_err (%)" for t in tests), "pooled t_err (%)", "pooled r_err (deg/100 m)"]
     rows = [
         [
-            f"BEVO learned ({len(seeds)} seeds)",
+            f"{d.get('learned_label', 'BEVO learned')} ({len(seeds)} seeds)",
             *(spread([d["learned"][s][t]["t_err_pct"] for s in seeds]) for t in tests),
             spread([d["learned"][s]["pooled"]["t_err_pct"] for s in seeds]),
             spread([d["learned"][s]["pooled"]["r_err_deg_per_100m"] for s in seeds]),
@@ -638,16 +638,23 @@ def kitti_worlds() -> str:
     """The flat and the street world's pooled 09 + 10 errors side by side."""
     flat, street = record(KITTI_SIMULATED_IMU), record(KITTI_STREET)
 
-    def learned(d: dict, key: str) -> str:
+    def learned(d: dict, label: str, key: str) -> str:
+        if d.get("learned_label", "BEVO learned") != label or not d["learned"]:
+            return "-"
         return spread([d["learned"][s]["pooled"][key] for s in seeds_of(d["learned"])])
 
     def hand(d: dict, label: str, key: str) -> str:
         return num(d["hand_set"][label]["pooled"][key]) if label in d["hand_set"] else "-"
 
-    rows = [
-        [f"BEVO learned ({len(seeds_of(flat['learned']))} seeds; {len(seeds_of(street['learned']))} in the street world)"]
-        + [learned(d, k) for k in ("t_err_pct", "r_err_deg_per_100m") for d in (flat, street)]
-    ]
+    rows = []
+    for label in dict.fromkeys(d.get("learned_label", "BEVO learned") for d in (flat, street)):
+        counts = [len(seeds_of(d["learned"])) if d.get("learned_label", "BEVO learned") == label else 0 for d in (flat, street)]
+        seeds = (
+            f"{counts[0]} seeds" if counts[0] == counts[1] else f"{max(counts)} seeds, {'flat' if counts[0] else 'street'} world"
+        )
+        rows.append(
+            [f"{label} ({seeds})"] + [learned(d, label, k) for k in ("t_err_pct", "r_err_deg_per_100m") for d in (flat, street)]
+        )
     for label in street["hand_set"]:
         rows.append([label] + [hand(d, label, k) for k in ("t_err_pct", "r_err_deg_per_100m") for d in (flat, street)])
     header = ["09 + 10 pooled", "t_err flat (%)", "t_err street (%)", "r_err flat (deg/100 m)", "r_err street (deg/100 m)"]
@@ -667,7 +674,8 @@ def kitti_wins(name: str = KITTI_SIMULATED_IMU) -> str:
     seeds = seeds_of(d["learned"])
     if not seeds:
         return "no seed trained"
-    hand = d["hand_set"]["BEVO hand-set"]["pooled"]["t_err_pct"]
+    baseline = "street preset (hand-set)" if d.get("model") == "street" else "BEVO hand-set"
+    hand = d["hand_set"][baseline]["pooled"]["t_err_pct"]
     test = sum(d["learned"][s]["pooled"]["t_err_pct"] < hand for s in seeds)
     runs = [d["training"][s] for s in seeds]
     val = sum(r["validation_learned"]["t_err_pct"] < r["validation_hand_set"]["t_err_pct"] for r in runs)
@@ -679,6 +687,7 @@ def kitti_wins(name: str = KITTI_SIMULATED_IMU) -> str:
 
 LOCALIZATION = "experiments/results/localization.json"
 LOCALIZATION_STREET = "experiments/results/localization_street.json"
+LOCALIZATION_STREET_PRESET = "experiments/results/localization_street_preset.json"
 
 
 def _localization(kind: str, name: str = LOCALIZATION) -> str:
@@ -927,6 +936,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "kitti_worlds": kitti_worlds,
     "kitti_training_sequences_street": kitti_training_sequences,
     "localization_carla_street": lambda: _localization("carla", LOCALIZATION_STREET),
+    "localization_carla_street_preset": lambda: _localization("carla", LOCALIZATION_STREET_PRESET),
     "localization_carla": localization_carla,
     "localization_aeroground": localization_aeroground,
     "localization_validation": localization_validation,
@@ -954,6 +964,8 @@ VALUES: dict[str, Callable[[], str]] = {
     "kitti_wins": kitti_wins,
     "kitti_wins_real_imu": lambda: kitti_wins(KITTI_REAL_IMU),
     "kitti_wins_street": lambda: kitti_wins(KITTI_STREET),
+    "kitti_street_frames": lambda: str(record(KITTI_STREET)["frames_per_training_sequence"]),
+    "localization_wins_street_preset": lambda: localization_wins(LOCALIZATION_STREET_PRESET),
     "localization_wins_street": lambda: localization_wins(LOCALIZATION_STREET),
     "localization_wins": localization_wins,
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,

@@ -24,7 +24,8 @@ sequence, 00-10: the test sequences whole, the training and validation sequences
 frames the first seed trained or validated on, as rendered for it (seed 0's rendering where no
 seed trained; their scores under ``training_sequences``). A seed whose training fails (the
 command stops on non-finite values) is recorded as failed; ``--seeds`` with no value runs the
-hand-set rows only.
+hand-set rows only. ``--model street`` trains the street preset (its camera-to-road calibration,
+road view and bands learned) instead of BEVO.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from jbevo.cli import train
+from jbevo.cli.common import MODELS
 from jbevo.data.catalog import load_sequences
 from jbevo.data.synthetic.street import WORLDS
 from jbevo.eval.batch import run_many
@@ -54,6 +56,8 @@ from jbevo.training import checkpoint
 
 RESULTS = Path(__file__).resolve().parent / "results"
 TEST = ("09", "10")
+# what the learned rows are, per --model
+LEARNED = {"bevo": "BEVO learned", "street": "street preset learned"}
 # label: (attitude source, band geometry)
 HAND_SET = {
     "BEVO hand-set": ("filter", True),
@@ -98,6 +102,13 @@ def main(argv=None) -> int:
         default="flat",
         help="the synthetic world: flat, or street (structures, slopes, camera mounting, exposure; records *_street.json)",
     )
+    p.add_argument(
+        "--model",
+        choices=MODELS,
+        default="bevo",
+        help="the model the seeds train: bevo (BEVO with bands) or street (the street preset, camera against the road "
+        "learned too)",
+    )
     p.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2], help="training seeds (none: the hand-set rows only)")
     p.add_argument("--epochs", type=int, default=3)
     p.add_argument("--frames", type=int, default=500, help="training and validation frames per sequence (0: all)")
@@ -139,6 +150,8 @@ def main(argv=None) -> int:
                 "256",
                 "4.0",
                 "--bands",
+                "--model",
+                args.model,
                 "--train",
                 *fit,
                 "--val",
@@ -181,7 +194,7 @@ def main(argv=None) -> int:
     drawn = {label: models[label] for label in ("BEVO hand-set", "BEVO hand-set without bands", "true attitude (upper bound)")}
     if first is not None:
         learned_model = checkpoint.load_model(args.out / f"{record}_run" / f"seed{first}" / "best.ckpt", Bevo)
-        drawn = {f"BEVO learned (seed {first})": learned_model} | drawn
+        drawn = {f"{LEARNED[args.model]} (seed {first})": learned_model} | drawn
     if args.world == "street":
         drawn["street preset (hand-set)"] = models["street preset (hand-set)"]
     title = f"({dataset}{', real IMU' if args.kitti_imu else ''}{', street world' if args.world == 'street' else ''})"
@@ -189,7 +202,7 @@ def main(argv=None) -> int:
         args.out / record,
         seqs,
         list(TEST),
-        {label: learned[first] if label.startswith("BEVO learned") else hand[label] for label in drawn},
+        {label: learned[first] if label.startswith(LEARNED[args.model]) else hand[label] for label in drawn},
         title,
     )
     # The training and validation sequences as the first seed trained on them (its rendering).
@@ -218,6 +231,8 @@ def main(argv=None) -> int:
             "window": args.window,
             "bev": {"resolution": 0.1, "shape": [256, 256], "near": 4.0},
             "camera": "KITTI camera 0" if dataset == "kitti" else "kitti",
+            "model": args.model,
+            "learned_label": LEARNED[args.model],
             "learned": strip(learned),
             "hand_set": strip(hand),
             "training": training,

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerate every committed record (benchmarks/results/*.json, experiments/results/*.json), then
 # the measured tables of the README and docs/ from them. Needs the bench extra
-# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about four hours on
+# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about five hours on
 # a 2-core CPU. Timings are of this machine: run nothing else beside it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -24,8 +24,9 @@ python experiments/bands.py
 python experiments/builtin_training.py
 python experiments/kitti_odometry.py
 python experiments/kitti_odometry.py --real-imu
-python experiments/kitti_odometry.py --world street --seeds  # hand-set rows: BEVO + bands diverges in training there
+python experiments/kitti_odometry.py --world street --model street --frames 200  # the street preset learned
 python experiments/localization.py
 python experiments/localization.py --world street --kinds carla --seeds 0
+python experiments/localization.py --world street --model street --kinds carla
 python experiments/localization_smoothing.py
 python docs/build.py
