@@ -1,7 +1,10 @@
 """Simulator speed: frames per second of the ground renderer at KITTI size (376x1241, the KITTI
 camera 0 intrinsics) over a procedural drive, alone and as a sequence's frames are made (with
 the day condition's exposure, sensor noise and 8-bit output: ``frames_per_s_kitti_size``), and
-the time for a whole procedural sequence (trajectory, IMU and images) with the small camera.
+the time for a whole procedural sequence (trajectory, IMU and images) with the small camera; the
+same for the street world (:mod:`jbevo.data.synthetic.street`: the 32 nearest structures ray-cast
+per frame, the mounted camera, exposure gain and vignetting), timed beside the flat world in the
+same process (``street_slowdown_kitti_size`` = flat frames/s over street frames/s).
 
     python benchmarks/simulator.py [--frames 64] [--repeats 5]
 
@@ -22,7 +25,9 @@ import numpy as np
 
 from jbevo.data.synthetic.conditions import CONDITIONS
 from jbevo.data.synthetic.render import render_batch
-from jbevo.data.synthetic.sequences import _frames, procedural_sequence
+from jbevo.data.synthetic.sequences import _frames, _half_fov, procedural_sequence
+from jbevo.data.synthetic.street import STREET, exposure_gains, mounted_camera, vignette
+from jbevo.data.synthetic.structures import nearest_boxes, place_structures
 from jbevo.data.synthetic.trajectories import procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.files import write_json_atomic
@@ -50,6 +55,13 @@ def main() -> None:
     seconds_render = best_seconds(lambda: render_only(world, camera, poses), args.repeats)
     seconds = best_seconds(lambda: _frames(world, camera, poses, times, None, keys, day), args.repeats)
     kitti_fps = args.frames / seconds
+    view = np.asarray(poses, float)
+    boxes = jax.tree_util.tree_map(jnp.asarray, nearest_boxes(place_structures(view, STREET, 0), view, _half_fov(camera)))
+    gains = jnp.asarray(exposure_gains(args.frames, STREET, 0))
+    street_args = (boxes, gains, vignette(camera, STREET.vignetting), STREET.ground_contrast)
+    mounted = mounted_camera(camera, STREET)
+    seconds_street = best_seconds(lambda: _frames(world, mounted, poses, times, None, keys, day, *street_args), args.repeats)
+    street_fps = args.frames / seconds_street
     print(
         f"render KITTI size: {args.frames / seconds_render:.1f} frames/s; with exposure, sensor noise and 8-bit "
         f"output: {kitti_fps:.1f} frames/s ({1e3 * seconds / args.frames:.2f} ms/frame)"
@@ -61,6 +73,13 @@ def main() -> None:
     jax.block_until_ready(seq.images)
     seq_seconds = time.perf_counter() - t0
     print(f"procedural sequence of 200 frames (small camera, IMU, trajectory): {seq_seconds:.2f} s")
+    print(f"street world, KITTI size: {street_fps:.1f} frames/s ({kitti_fps / street_fps:.2f}x slower than the flat world)")
+    procedural_sequence(0, 8, world=world, street=STREET)
+    t0 = time.perf_counter()
+    seq = procedural_sequence(1, 200, world=world, street=STREET)
+    jax.block_until_ready(seq.images)
+    street_seq_seconds = time.perf_counter() - t0
+    print(f"street procedural sequence of 200 frames (small camera): {street_seq_seconds:.2f} s")
 
     write_json_atomic(
         args.out,
@@ -70,6 +89,11 @@ def main() -> None:
             "render_only_frames_per_s_kitti_size": args.frames / seconds_render,
             "world_build_s": world_seconds,
             "procedural_sequence_200_frames_small_camera_s": seq_seconds,
+            "street_frames_per_s_kitti_size": street_fps,
+            "street_ms_per_frame_kitti_size": 1e3 * seconds_street / args.frames,
+            "street_slowdown_kitti_size": kitti_fps / street_fps,
+            "street_procedural_sequence_200_frames_small_camera_s": street_seq_seconds,
+            "street_structures_per_frame": int(boxes.valid.shape[-1]),
             "frames": args.frames,
             "image_shape": list(camera.image_shape),
             "machine": {

@@ -508,6 +508,16 @@ def simulator_speed() -> str:
         ["KITTI-size frame, rendering only (frames/s)", num(d["render_only_frames_per_s_kitti_size"], 0)],
         ["building a town (s)", num(d["world_build_s"], 2)],
         ["a 200-frame drive with the small camera (s)", num(d["procedural_sequence_200_frames_small_camera_s"], 2)],
+        [
+            f"street world: KITTI-size frame with its {d['street_structures_per_frame']} nearest structures, exposure gain "
+            "and vignetting (frames/s)",
+            num(d["street_frames_per_s_kitti_size"], 1),
+        ],
+        ["street world: flat world's frames/s over the street world's (same process)", num(d["street_slowdown_kitti_size"], 2)],
+        [
+            "street world: a 200-frame drive with the small camera (s)",
+            num(d["street_procedural_sequence_200_frames_small_camera_s"], 2),
+        ],
     ]
     return table(["simulator", "measured"], rows)
 
