@@ -94,8 +94,9 @@ def train(args: argparse.Namespace) -> int:
             train_scene = scene(args.kind, args.town, args.condition, "train", args.seed, world, frames, street)
             val_scene = scene(args.kind, args.town, args.condition, "val", args.seed, world, frames, street)
         with common.reading(f"the run in {args.out}"):
+            hand_set = localization_model(args.kind, args.model == "street")
             model, params, static, optimizer, opt_state, progress_ = start_run(
-                localization_model(args.kind, args.model == "street"),
+                hand_set,
                 args.out,
                 args.lr,
                 args.clip,
@@ -111,7 +112,7 @@ def train(args: argparse.Namespace) -> int:
         f"BEVO+: {model.num_learnable()} learnable parameters; {args.kind} scene in {args.town} ({args.condition}): "
         f"{train_scene.sequence.num_frames} training and {val_scene.sequence.num_frames} validation frames"
     )
-    before = validate_localization(localization_model(args.kind, args.model == "street"), val_scene.sequence, val_scene.map)
+    before = validate_localization(hand_set, val_scene.sequence, val_scene.map)
     _print("validation before training (hand-set)", before)
     if progress_["epoch"] == 0:
         # The hand-set parameters are the first candidate: a learned checkpoint replaces them
@@ -172,8 +173,10 @@ def train(args: argparse.Namespace) -> int:
 def evaluate(args: argparse.Namespace) -> dict:
     """Localize the ``--part`` of the scene under every condition; returns the metrics written."""
     with common.reading(f"the checkpoint {args.checkpoint}"):
-        hand_set = localization_model(args.kind, args.model == "street")
-        model = hand_set if args.checkpoint is None else checkpoint.load_model(args.checkpoint, BevoPlus)
+        if args.checkpoint is None:
+            model = localization_model(args.kind, args.model == "street")
+        else:
+            model = checkpoint.load_model(args.checkpoint, BevoPlus)
     world = World.create(args.town)
     frames = args.frames or None
     with common.reading("the scene"):

@@ -19,8 +19,9 @@ GYRO_WINDOW = float(np.radians(2.0))
 def localization_model(kind: str, street: bool = False) -> BevoPlus:
     """The hand-set BEVO+ for a scene kind (``carla`` or ``aeroground``): its BEV grids, and the
     odometry's rotation searched within :data:`GYRO_WINDOW` of the gyro's turn. With ``street`` the
-    odometry is the street preset's (:func:`street_model` without bands): the road view, whose
-    camera attitude and height the map match uses too, and the gyro's turn fused with DPC's."""
+    odometry gains the street preset's parts (:func:`street_model`, without its bands): the road
+    view, whose camera attitude and height the map match uses too, and the gyro's turn fused with
+    DPC's."""
     if kind not in SCENE_KINDS:
         raise ValueError(f"unknown scene kind {kind!r}; known: {sorted(SCENE_KINDS)}")
     odometry_grid, map_grid = SCENE_KINDS[kind].grids()

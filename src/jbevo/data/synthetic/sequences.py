@@ -305,16 +305,16 @@ def synthetic_copy(
     if not np.all(np.isfinite(truth)):
         raise ValueError("synthetic_copy needs a sequence whose every pose is known (seq.poses has NaN)")
     times = np.asarray(seq.frame_times, float)
-    step = 1.0 / frame_rate(times)
+    rate = frame_rate(times)
     height = float(seq.camera.height)
-    recorded = recorded_road_tilt(truth, frame_rate(times))
+    recorded = recorded_road_tilt(truth, rate)
     recorded = recorded - recorded.mean(0)  # the run's mean attitude is the camera's own (its mounting)
     tilt = np.zeros((len(truth), 2)) if street is None else street_tilt(street, recorded, truth, seed)
     view = road_relative(truth, tilt, height)
     return render_sequence(
         world,
         seq.camera,
-        np.r_[times[0] - step, times],
+        np.r_[times[0] - 1.0 / rate, times],
         truth,
         np.asarray(seq.imu_times),
         np.asarray(seq.gyro),
