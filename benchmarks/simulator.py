@@ -3,8 +3,9 @@ camera 0 intrinsics) over a procedural drive, alone and as a sequence's frames a
 the day condition's exposure, sensor noise and 8-bit output: ``frames_per_s_kitti_size``), and
 the time for a whole procedural sequence (trajectory, IMU and images) with the small camera; the
 same for the street world (:mod:`jbevo.data.synthetic.street`: the 32 nearest structures ray-cast
-per frame, the mounted camera, exposure gain and vignetting), timed beside the flat world in the
-same process (``street_slowdown_kitti_size`` = flat frames/s over street frames/s).
+per frame, the mounted camera, exposure gain and vignetting), timed in interleaved rounds with
+the flat world (``street_slowdown_kitti_size`` = flat frames/s over street frames/s). The
+200-frame drives are timed after one of the same length has compiled.
 
     python benchmarks/simulator.py [--frames 64] [--repeats 5]
 
@@ -32,7 +33,16 @@ from jbevo.data.synthetic.trajectories import procedural_drive
 from jbevo.data.synthetic.world import World
 from jbevo.files import write_json_atomic
 from jbevo.geometry.camera import Camera
-from timing import best_seconds
+from timing import best_seconds, best_seconds_interleaved
+
+
+def drive_seconds(world: World, street, frames: int = 200) -> float:
+    """Seconds for a whole procedural sequence of ``frames`` frames (small camera), after one of
+    the same length has compiled everything."""
+    procedural_sequence(0, frames, world=world, street=street)
+    t0 = time.perf_counter()
+    jax.block_until_ready(procedural_sequence(1, frames, world=world, street=street).images)
+    return time.perf_counter() - t0
 
 
 def main() -> None:
@@ -53,32 +63,29 @@ def main() -> None:
     day = CONDITIONS["day"]
     render_only = jax.jit(render_batch)
     seconds_render = best_seconds(lambda: render_only(world, camera, poses), args.repeats)
-    seconds = best_seconds(lambda: _frames(world, camera, poses, times, None, keys, day), args.repeats)
-    kitti_fps = args.frames / seconds
     view = np.asarray(poses, float)
     boxes = jax.tree_util.tree_map(jnp.asarray, nearest_boxes(place_structures(view, STREET, 0), view, _half_fov(camera)))
     gains = jnp.asarray(exposure_gains(args.frames, STREET, 0))
     street_args = (boxes, gains, vignette(camera, STREET.vignetting), STREET.ground_contrast)
     mounted = mounted_camera(camera, STREET)
-    seconds_street = best_seconds(lambda: _frames(world, mounted, poses, times, None, keys, day, *street_args), args.repeats)
-    street_fps = args.frames / seconds_street
+    both = best_seconds_interleaved(
+        {
+            "flat": lambda: _frames(world, camera, poses, times, None, keys, day),
+            "street": lambda: _frames(world, mounted, poses, times, None, keys, day, *street_args),
+        },
+        args.repeats,
+    )
+    seconds, seconds_street = both["flat"], both["street"]
+    kitti_fps, street_fps = args.frames / seconds, args.frames / seconds_street
     print(
         f"render KITTI size: {args.frames / seconds_render:.1f} frames/s; with exposure, sensor noise and 8-bit "
         f"output: {kitti_fps:.1f} frames/s ({1e3 * seconds / args.frames:.2f} ms/frame)"
     )
 
-    procedural_sequence(0, 8, world=world)  # compile for the small camera
-    t0 = time.perf_counter()
-    seq = procedural_sequence(1, 200, world=world)
-    jax.block_until_ready(seq.images)
-    seq_seconds = time.perf_counter() - t0
+    seq_seconds = drive_seconds(world, None)
     print(f"procedural sequence of 200 frames (small camera, IMU, trajectory): {seq_seconds:.2f} s")
     print(f"street world, KITTI size: {street_fps:.1f} frames/s ({kitti_fps / street_fps:.2f}x slower than the flat world)")
-    procedural_sequence(0, 8, world=world, street=STREET)
-    t0 = time.perf_counter()
-    seq = procedural_sequence(1, 200, world=world, street=STREET)
-    jax.block_until_ready(seq.images)
-    street_seq_seconds = time.perf_counter() - t0
+    street_seq_seconds = drive_seconds(world, STREET)
     print(f"street procedural sequence of 200 frames (small camera): {street_seq_seconds:.2f} s")
 
     write_json_atomic(

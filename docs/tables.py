@@ -659,9 +659,12 @@ def kitti_worlds() -> str:
     rows = []
     for label in dict.fromkeys(d.get("learned_label", "BEVO learned") for d in (flat, street)):
         counts = [len(seeds_of(d["learned"])) if d.get("learned_label", "BEVO learned") == label else 0 for d in (flat, street)]
-        seeds = (
-            f"{counts[0]} seeds" if counts[0] == counts[1] else f"{max(counts)} seeds, {'flat' if counts[0] else 'street'} world"
-        )
+        if counts[0] == counts[1]:
+            seeds = f"{counts[0]} seeds"
+        elif 0 in counts:
+            seeds = f"{max(counts)} seeds, {'flat' if counts[0] else 'street'} world"
+        else:
+            seeds = f"{counts[0]} seeds; {counts[1]} in the street world"
         rows.append(
             [f"{label} ({seeds})"] + [learned(d, label, k) for k in ("t_err_pct", "r_err_deg_per_100m") for d in (flat, street)]
         )
@@ -974,7 +977,7 @@ VALUES: dict[str, Callable[[], str]] = {
     "kitti_wins": kitti_wins,
     "kitti_wins_real_imu": lambda: kitti_wins(KITTI_REAL_IMU),
     "kitti_wins_street": lambda: kitti_wins(KITTI_STREET),
-    "kitti_street_frames": lambda: str(record(KITTI_STREET)["frames_per_training_sequence"]),
+    "kitti_street_frames": lambda: str(record(KITTI_STREET)["frames_per_training_sequence"] or "all"),
     "localization_wins_street_preset": lambda: localization_wins(LOCALIZATION_STREET_PRESET),
     "localization_wins_street": lambda: localization_wins(LOCALIZATION_STREET),
     "localization_wins": localization_wins,

@@ -5,6 +5,7 @@ ground-truth motion and a simulated ADIS16448 IMU, or with ``--real-imu`` the re
 IMU and is left out of training), or real KITTI data with ``--kitti-root`` (and ``--kitti-imu``).
 
     python experiments/kitti_odometry.py --reference $JBEVO_REFERENCE_DATA [--seeds 0 1 2] [--epochs 3] [--real-imu]
+        [--world street] [--model street]
 
 KITTI camera 0 at full size, a 256 x 256 BEV at 0.1 m/px from 4 m, BEVO with the band geometry.
 Each training seed (the rendering's and IMU's noise, and the shuffling) trains on the first

@@ -7,6 +7,7 @@ quarters (the first two train, the third validates, the last tests):
   trained in town01, tested in town02 under the same three conditions.
 
     python experiments/localization.py [--seeds 0 1 2] [--epochs 3] [--kinds carla aeroground] [--world street]
+        [--model street]
 
 For each kind and training seed (the training drive and the shuffling): ``python -m jbevo.localize
 train`` (checkpoint selection on the validation quarter, the hand-set parameters included), then

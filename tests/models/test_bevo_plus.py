@@ -257,3 +257,11 @@ def test_map_matching_sees_the_camera_against_the_road(carla):
     )(model)
     np.testing.assert_allclose(got.fix, want.fix, atol=1e-5)
     assert float(got.confidence) == pytest.approx(float(want.confidence), abs=1e-6)
+
+
+def test_the_street_start_gives_the_odometry_the_street_presets_parts():
+    plain, street = localization_model("carla"), localization_model("carla", street=True)
+    assert plain.odometry.road is None and plain.odometry.yaw_fusion is None
+    assert street.odometry.road is not None and street.odometry.yaw_fusion is not None
+    assert street.num_learnable() > plain.num_learnable()
+    assert street.map_grid == plain.map_grid and street.odometry.grid == plain.odometry.grid

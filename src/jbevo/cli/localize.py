@@ -26,6 +26,10 @@ and max position error (m), the mean yaw error (deg), the final position error, 
 driven and, for BEVO+, the fraction of accepted map fixes. With ``--smooth`` it also smooths
 BEVO+'s trajectory offline (:mod:`jbevo.models.localization_smoother`, the unscented RTS smoother
 over the pose filter) and reports it as "BEVO+ smoothed" beside the filtered one.
+
+``--model street`` starts from the street preset's odometry (road view and yaw fusion,
+:func:`jbevo.models.presets.localization_model`) instead of the paper's; a checkpoint brings its
+own model, and ``metrics.json`` names the one that ran.
 """
 
 from __future__ import annotations
@@ -223,7 +227,7 @@ def evaluate(args: argparse.Namespace) -> dict:
         "kind": args.kind,
         "town": args.town,
         "world": args.world,
-        "model": args.model if args.checkpoint is None else "checkpoint",
+        "model": "street" if model.odometry.road is not None else "bevo",
         "part": args.part,
     }
     write_json_atomic(args.out / "metrics.json", summary)

@@ -185,9 +185,29 @@ def test_a_synthetic_copy_keeps_the_drive_and_replaces_the_images(world):
         synthetic_copy(broken, world)
 
 
-def test_a_copy_takes_the_frame_rate_of_its_drive():
+def test_a_copy_takes_the_frame_rate_of_its_drive(world, monkeypatch):
     # KITTI's camera runs at 9.6 Hz, not 10: the road's 2 s low-pass and the exposure's 1.5 s
     # walk are set in seconds, so their width in frames follows the drive's own rate.
+    import jbevo.data.synthetic.sequences as sequences
+
+    seen = {}
+    road_tilt, gains = sequences.recorded_road_tilt, sequences.exposure_gains
+
+    def road_tilt_spy(body_poses, frame_rate=10.0, **kwargs):
+        seen["road"] = frame_rate
+        return road_tilt(body_poses, frame_rate, **kwargs)
+
+    def gains_spy(frames, street, seed, frame_rate=10.0):
+        seen["exposure"] = frame_rate
+        return gains(frames, street, seed, frame_rate)
+
+    monkeypatch.setattr(sequences, "recorded_road_tilt", road_tilt_spy)
+    monkeypatch.setattr(sequences, "exposure_gains", gains_spy)
+    source = procedural_sequence(5, 6, world=world)
+    at_20_hz = eqx.tree_at(lambda s: s.frame_times, source, source.frame_times[0] + 0.05 * jnp.arange(6))
+    synthetic_copy(at_20_hz, world, STREET)
+    assert seen == {"road": pytest.approx(20.0), "exposure": pytest.approx(20.0)}
+
     kitti_like = 0.1038752 * np.arange(50)
     assert frame_rate(kitti_like) == pytest.approx(1 / 0.1038752)
     assert frame_rate(0.05 * np.arange(5)) == pytest.approx(20.0)

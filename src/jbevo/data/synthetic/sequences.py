@@ -337,6 +337,7 @@ def builtin_dataset(
 
 __all__ = [
     "builtin_dataset",
+    "frame_rate",
     "kitti_sequence",
     "make_sequence",
     "procedural_sequence",
