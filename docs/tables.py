@@ -948,6 +948,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "kitti_validation_street": lambda: kitti_validation(KITTI_STREET),
     "kitti_worlds": kitti_worlds,
     "kitti_training_sequences_street": kitti_training_sequences,
+    "kitti_training_sequences_flat": lambda: kitti_training_sequences(KITTI_SIMULATED_IMU),
     "localization_carla_street": lambda: _localization("carla", LOCALIZATION_STREET),
     "localization_carla_street_preset": lambda: _localization("carla", LOCALIZATION_STREET_PRESET),
     "localization_carla": localization_carla,
