@@ -596,6 +596,11 @@ KITTI_REAL_IMU = "experiments/results/kitti_odometry_real_imu.json"
 KITTI_STREET = "experiments/results/kitti_odometry_street.json"
 
 
+def learned_label(d: dict) -> str:
+    """What a KITTI-style record's learned rows are (records before ``--model`` trained BEVO)."""
+    return d.get("learned_label", "BEVO learned")
+
+
 def kitti_odometry(name: str = KITTI_SIMULATED_IMU) -> str:
     d = record(name)
     tests = d["test"]
@@ -603,7 +608,7 @@ def kitti_odometry(name: str = KITTI_SIMULATED_IMU) -> str:
     header = ["method", *(f"{t} t_err (%)" for t in tests), "pooled t_err (%)", "pooled r_err (deg/100 m)"]
     rows = [
         [
-            f"{d.get('learned_label', 'BEVO learned')} ({len(seeds)} seeds)",
+            f"{learned_label(d)} ({len(seeds)} seeds)",
             *(spread([d["learned"][s][t]["t_err_pct"] for s in seeds]) for t in tests),
             spread([d["learned"][s]["pooled"]["t_err_pct"] for s in seeds]),
             spread([d["learned"][s]["pooled"]["r_err_deg_per_100m"] for s in seeds]),
@@ -649,7 +654,7 @@ def kitti_worlds() -> str:
     flat, street = record(KITTI_SIMULATED_IMU), record(KITTI_STREET)
 
     def learned(d: dict, label: str, key: str) -> str:
-        if d.get("learned_label", "BEVO learned") != label or not d["learned"]:
+        if learned_label(d) != label or not d["learned"]:
             return "-"
         return spread([d["learned"][s]["pooled"][key] for s in seeds_of(d["learned"])])
 
@@ -657,8 +662,8 @@ def kitti_worlds() -> str:
         return num(d["hand_set"][label]["pooled"][key]) if label in d["hand_set"] else "-"
 
     rows = []
-    for label in dict.fromkeys(d.get("learned_label", "BEVO learned") for d in (flat, street)):
-        counts = [len(seeds_of(d["learned"])) if d.get("learned_label", "BEVO learned") == label else 0 for d in (flat, street)]
+    for label in dict.fromkeys(learned_label(d) for d in (flat, street)):
+        counts = [len(seeds_of(d["learned"])) if learned_label(d) == label else 0 for d in (flat, street)]
         if counts[0] == counts[1]:
             seeds = f"{counts[0]} seeds"
         elif 0 in counts:
