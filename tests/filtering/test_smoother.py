@@ -83,6 +83,20 @@ def test_a_gap_in_the_measurements_is_bridged_as_filterpy_does():
     assert np.all(sm_var < f_var)
 
 
+def test_the_filters_gains_give_the_smoother_that_recomputes_them():
+    # filter() keeps each step's smoother gain; a result without them (filter_blocks, beliefs
+    # assembled by hand) makes the smoother push the sigma points through the motion again.
+    seq, x0 = localization(120)
+    fixes = np.array(seq.fixes)
+    fixes[40:70] = np.nan
+    q_seq = jnp.asarray(Q)[None] * jnp.linspace(0.5, 3.0, 120)[:, None, None]
+    filtered, kept = run(seq, x0, fixes=jnp.asarray(fixes), q=q_seq)
+    assert filtered.smoother_gains is not None
+    recomputed = smooth(planar_pose_model(), filtered._replace(smoother_gains=None), seq.increments, q_seq)
+    for a, b in zip(kept, recomputed, strict=True):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
 def test_equals_the_kalman_rts_smoother_on_a_linear_model():
     rng = np.random.default_rng(0)
     n, m, steps = 4, 2, 150
@@ -169,5 +183,7 @@ def test_bad_input_gives_clear_errors(as_users_run):
         smooth(model, result, seq.increments, jnp.eye(2))
     with pytest.raises(ValueError, match="every controls leaf must have leading axis 20"):
         smooth(model, result, seq.increments[:10], jnp.asarray(Q))
+    with pytest.raises(ValueError, match="predictions and gains must have the filtered beliefs' shapes"):
+        smooth(model, result._replace(smoother_gains=result.smoother_gains[:, :2]), seq.increments, jnp.asarray(Q))
     one = smooth(model, jax.tree.map(lambda a: a[:1] if jnp.ndim(a) else a, result), seq.increments[:1], jnp.asarray(Q))
     np.testing.assert_array_equal(one.smoothed_mean, result.filtered_mean[:1])

@@ -12,6 +12,11 @@ in reverse). At step ``k``, with the filtered belief ``N(m_k, P_k)`` and the smo
 * ``m^s_k = m_k + G (m^s_{k+1} - m^-)`` and ``P^s_k = P_k + G (P^s_{k+1} - P^-) G^T``
   (symmetrised).
 
+The gain needs nothing from later steps: :func:`jbevo.filtering.ukf.filter` computes it with
+each prediction (``FilterResult.smoother_gains``) and :func:`smooth` then reuses it and the
+filter's predictions; :func:`smooth_beliefs` (beliefs that are not one ``filter`` call) and a
+result without gains recompute them as above.
+
 This is Särkkä's unscented RTS smoother (Bayesian Filtering and Smoothing, 2013, alg. 9.3) and
 filterpy's ``UnscentedKalmanFilter.rts_smoother``; for a linear model it is the Kalman RTS
 smoother exactly. The step from ``k`` to ``k + 1`` uses ``controls[k + 1]`` and
@@ -52,8 +57,67 @@ def smooth(
 ) -> SmootherResult:
     """The unscented RTS smoother (module docstring) over ``result``, the output of
     :func:`jbevo.filtering.ukf.filter` run with the same ``model``, ``controls``, ``motion_cov``
-    (Q, constant or with a leading time axis) and ``scheme``."""
-    return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme)
+    (Q, constant or with a leading time axis) and ``scheme``.
+
+    Where ``result`` keeps the smoother's gains (:func:`~jbevo.filtering.ukf.filter` does: each
+    is known once the step's prediction is), the backward pass reuses them and the filter's
+    predictions instead of pushing sigma points through the motion again: the same quantities,
+    computed once."""
+    if result.smoother_gains is None:
+        return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme)
+    means, covs = result.filtered_mean, result.filtered_cov
+    steps, _ = _checked_inputs(means, covs, controls, motion_cov)
+    if result.predicted_mean.shape != means.shape or result.smoother_gains.shape != covs.shape:
+        raise ValueError(
+            f"the result's predictions and gains must have the filtered beliefs' shapes {means.shape} and {covs.shape}, "
+            f"got {result.predicted_mean.shape} and {result.smoother_gains.shape}"
+        )
+    if steps == 1:
+        return SmootherResult(means, covs, jnp.zeros_like(covs))
+
+    def back(later, inputs):
+        later_mean, later_cov = later
+        mean, cov, predicted_mean, predicted_cov, gain = inputs
+        return _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted_cov, gain)
+
+    inputs = (means[:-1], covs[:-1], result.predicted_mean[1:], result.predicted_cov[1:], result.smoother_gains[1:])
+    _, (sm, sc, gains) = jax.lax.scan(back, (means[-1], covs[-1]), inputs, reverse=True)
+    return _with_last(sm, sc, gains, means, covs)
+
+
+def _checked_inputs(means, covs, controls, motion_cov) -> tuple[int, Array]:
+    """Raise on beliefs, controls or Q that do not fit together; ``(T, Q per step)``."""
+    if means.ndim != 2 or covs.shape != (*means.shape, means.shape[-1]):
+        raise ValueError(
+            f"the filtered beliefs must be means (T, n) and covariances (T, n, n), got {means.shape} and {covs.shape}"
+        )
+    steps, n = means.shape
+    motion_cov = jnp.asarray(motion_cov, means.dtype)
+    if motion_cov.shape not in ((n, n), (steps, n, n)):
+        raise ValueError(f"motion_cov must have shape ({n}, {n}) or ({steps}, {n}, {n}), got {motion_cov.shape}")
+    for leaf in jax.tree.leaves(controls):
+        if jnp.shape(leaf)[:1] != (steps,):
+            raise ValueError(f"every controls leaf must have leading axis {steps} (the filter's steps), got {jnp.shape(leaf)}")
+    return steps, jnp.broadcast_to(motion_cov, (steps, n, n))
+
+
+def _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted_cov, gain):
+    """One backward step given the gain: the smoothed belief at ``k`` (carry and output)."""
+    if model.state_residual is None:
+        innovation = later_mean - predicted_mean
+    else:
+        innovation = model.state_residual(later_mean, predicted_mean)
+    correction = gain @ innovation
+    new_mean = mean + correction if model.state_add is None else model.state_add(mean, correction)
+    new_cov = linalg.symmetrize(cov + gain @ (later_cov - predicted_cov) @ gain.T)
+    return (new_mean, new_cov), (new_mean, new_cov, gain)
+
+
+def _with_last(sm, sc, gains, means, covs) -> SmootherResult:
+    """The backward pass's steps ``0 .. T - 2`` and the last step's filtered belief."""
+    return SmootherResult(
+        jnp.concatenate([sm, means[-1:]]), jnp.concatenate([sc, covs[-1:]]), jnp.concatenate([gains, jnp.zeros_like(gains[:1])])
+    )
 
 
 def smooth_beliefs(
@@ -68,21 +132,10 @@ def smooth_beliefs(
     """:func:`smooth` over filtered beliefs given as arrays (``means[t]``, ``covs[t]``: the belief
     after step ``t``'s motion with ``controls[t]`` and its updates), for filters that are not one
     :func:`jbevo.filtering.ukf.filter` call (several updates per step, robust or linear ones)."""
-    if means.ndim != 2 or covs.shape != (*means.shape, means.shape[-1]):
-        raise ValueError(
-            f"the filtered beliefs must be means (T, n) and covariances (T, n, n), got {means.shape} and {covs.shape}"
-        )
-    steps, n = means.shape
-    motion_cov = jnp.asarray(motion_cov, means.dtype)
-    if motion_cov.shape not in ((n, n), (steps, n, n)):
-        raise ValueError(f"motion_cov must have shape ({n}, {n}) or ({steps}, {n}, {n}), got {motion_cov.shape}")
-    for leaf in jax.tree.leaves(controls):
-        if jnp.shape(leaf)[:1] != (steps,):
-            raise ValueError(f"every controls leaf must have leading axis {steps} (the filter's steps), got {jnp.shape(leaf)}")
+    steps, q_seq = _checked_inputs(means, covs, controls, motion_cov)
     if steps == 1:
         return SmootherResult(means, covs, jnp.zeros_like(covs))
-    q_seq = jnp.broadcast_to(motion_cov, (steps, n, n))
-    w = scheme.weights(n, means.dtype)
+    w = scheme.weights(means.shape[-1], means.dtype)
 
     def back(later, inputs):
         later_mean, later_cov = later
@@ -94,22 +147,13 @@ def smooth_beliefs(
         predicted_cov = linalg.symmetrize(weighted_outer(w.cov, dy, dy) + q)
         cross = weighted_outer(w.cov, dx, dy)
         gain = linalg.cho_solve(linalg.cholesky(predicted_cov), cross.T).T
-        if model.state_residual is None:
-            innovation = later_mean - predicted_mean
-        else:
-            innovation = model.state_residual(later_mean, predicted_mean)
-        correction = gain @ innovation
-        new_mean = mean + correction if model.state_add is None else model.state_add(mean, correction)
-        new_cov = linalg.symmetrize(cov + gain @ (later_cov - predicted_cov) @ gain.T)
-        return (new_mean, new_cov), (new_mean, new_cov, gain)
+        return _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted_cov, gain)
 
     later_controls = jax.tree.map(lambda a: a[1:], controls)
     _, (sm, sc, gains) = jax.lax.scan(
         back, (means[-1], covs[-1]), (means[:-1], covs[:-1], later_controls, q_seq[1:]), reverse=True
     )
-    return SmootherResult(
-        jnp.concatenate([sm, means[-1:]]), jnp.concatenate([sc, covs[-1:]]), jnp.concatenate([gains, jnp.zeros_like(gains[:1])])
-    )
+    return _with_last(sm, sc, gains, means, covs)
 
 
 __all__ = ["SmootherResult", "smooth", "smooth_beliefs"]

@@ -45,7 +45,6 @@ from jbevo.filtering.unscented import (
     offset_points,
     residuals,
     sigma_offsets,
-    sigma_points,
     weighted_mean,
     weighted_outer,
     weighted_sum,
@@ -90,6 +89,10 @@ class FilterResult(NamedTuple):
     predicted_cov: Float[Array, "T n n"]
     log_likelihoods: Float[Array, " T"]  #: log p(z_t | z_<t) per step (0 where nothing observed)
     log_likelihood: Float[Array, ""]  #: sum over all steps
+    #: The RTS smoother's gain into step t, ``Cov(x_{t-1}, x_t^-) (P_t^-)^-1`` (the belief before
+    #: step t's prediction against the predicted one); ``None`` where not kept
+    #: (:func:`filter_blocks`, results assembled by hand): the smoother then recomputes it.
+    smoother_gains: Float[Array, "T n n"] | None = None
 
 
 Scheme = MerweScaled | Julier
@@ -103,13 +106,26 @@ def predict(
     scheme: Scheme = MerweScaled(),
 ) -> GaussianState:
     """Propagate ``state`` through ``model.motion(x, control)`` and add ``motion_cov`` (Q)."""
+    return predict_with_cross(model, state, control, motion_cov, scheme)[0]
+
+
+def predict_with_cross(
+    model: StateSpaceModel,
+    state: GaussianState,
+    control: Any,
+    motion_cov: Float[Array, "n n"],
+    scheme: Scheme = MerweScaled(),
+) -> tuple[GaussianState, Float[Array, "n n"]]:
+    """:func:`predict`, and the cross-covariance ``Cov(x, x')`` of the state before and after
+    the motion (``sum_i Wc_i dx_i dy_i^T``), which an RTS smoother's gain needs."""
     mean, cov = state
     w = scheme.weights(mean.shape[-1], mean.dtype)
-    points = sigma_points(mean, linalg.cholesky(cov), w.spread, model.state_add)
-    moved = jax.vmap(model.motion, in_axes=(0, None))(points, control)
+    dx = sigma_offsets(linalg.cholesky(cov), w.spread)
+    moved = jax.vmap(model.motion, in_axes=(0, None))(offset_points(mean, dx, model.state_add), control)
     new_mean = weighted_mean(moved, w.mean, model.state_mean)
     d = residuals(moved, new_mean, model.state_residual)
-    return GaussianState(new_mean, linalg.symmetrize(weighted_outer(w.cov, d, d) + motion_cov))
+    predicted = GaussianState(new_mean, linalg.symmetrize(weighted_outer(w.cov, d, d) + motion_cov))
+    return predicted, weighted_outer(w.cov, dx, d)
 
 
 def update(
@@ -192,9 +208,12 @@ def _noise_at(noise: Array | None, t_noise: Array | None) -> Array:
 
 def _step(model, scheme, q_const, r_const, state, inputs):
     control, z, mask, q_t, r_t, z_input = inputs
-    predicted = predict(model, state, control, _noise_at(q_const, q_t), scheme)
+    predicted, cross = predict_with_cross(model, state, control, _noise_at(q_const, q_t), scheme)
     filtered, ll = update(model, predicted, z, _noise_at(r_const, r_t), scheme, mask, z_input)
-    return filtered, (filtered, predicted, ll)
+    # The RTS smoother's gain from the belief before this step to this step (the update already
+    # factorised the predicted covariance: XLA computes the factor once).
+    gain = linalg.cho_solve(linalg.cholesky(predicted.cov), cross.T).T
+    return filtered, (filtered, predicted, ll, gain)
 
 
 def filter(
@@ -233,10 +252,10 @@ def filter(
     def body(state, inputs):
         return _step(model, scheme, q_const, r_const, state, inputs)
 
-    _, (filtered, predicted, lls) = jax.lax.scan(
+    _, (filtered, predicted, lls, gains) = jax.lax.scan(
         body, initial, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), unroll=unroll
     )
-    return FilterResult(filtered.mean, filtered.cov, predicted.mean, predicted.cov, lls, jnp.sum(lls))
+    return FilterResult(filtered.mean, filtered.cov, predicted.mean, predicted.cov, lls, jnp.sum(lls), gains)
 
 
 def filter_blocks(
@@ -282,7 +301,7 @@ def filter_blocks(
         return _step(model, scheme, motion_cov, measurement_cov, state, (*inputs, None, None, None))
 
     def run_block(state, inputs):
-        last, (_, predicted, lls) = jax.lax.scan(inner, state, inputs)
+        last, (_, predicted, lls, _) = jax.lax.scan(inner, state, inputs)
         first_prediction = jax.tree.map(lambda a: a[0], predicted)
         return last, (last, first_prediction, jnp.sum(lls))
 
@@ -407,5 +426,6 @@ __all__ = [
     "filter_blocks",
     "linear_update",
     "predict",
+    "predict_with_cross",
     "update",
 ]
