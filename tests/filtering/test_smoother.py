@@ -136,7 +136,8 @@ def test_smoothing_lowers_the_error_and_the_variance():
     np.testing.assert_array_equal(smoothed.smoothed_mean[-1], filtered.filtered_mean[-1])
 
 
-def test_gradient_through_the_smoother_matches_finite_differences():
+@pytest.mark.parametrize("gains", ["the filter's", "recomputed"])
+def test_gradient_through_the_smoother_matches_finite_differences(gains):
     seq, x0 = localization(60)
     fixes = np.array(seq.fixes)
     fixes[20:30] = np.nan
@@ -147,6 +148,8 @@ def test_gradient_through_the_smoother_matches_finite_differences():
         q = DiagonalCovariance(params["q"])()
         r = DiagonalCovariance(params["r"])()
         result = ukf.filter(model, ukf.GaussianState(jnp.asarray(x0), jnp.asarray(P0)), seq.increments, jnp.asarray(fixes), q, r)
+        if gains == "recomputed":
+            result = result._replace(smoother_gains=None)
         sm = smooth(model, result, seq.increments, q).smoothed_mean
         d = sm - truth
         return jnp.mean(d[:, 0] ** 2 + d[:, 1] ** 2 + wrap_angle(d[:, 2]) ** 2)

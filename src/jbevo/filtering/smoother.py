@@ -62,15 +62,18 @@ def smooth(
     Where ``result`` keeps the smoother's gains (:func:`~jbevo.filtering.ukf.filter` does: each
     is known once the step's prediction is), the backward pass reuses them and the filter's
     predictions instead of pushing sigma points through the motion again: the same quantities,
-    computed once."""
+    computed once. ``controls``, ``motion_cov`` and ``scheme`` are then only checked against the
+    result's shapes (the filter's own were used); to smooth with others, pass
+    ``result._replace(smoother_gains=None)``, which recomputes everything with them."""
     if result.smoother_gains is None:
         return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme)
     means, covs = result.filtered_mean, result.filtered_cov
     steps, _ = _checked_inputs(means, covs, controls, motion_cov)
-    if result.predicted_mean.shape != means.shape or result.smoother_gains.shape != covs.shape:
+    shapes = (result.predicted_mean.shape, result.predicted_cov.shape, result.smoother_gains.shape)
+    if shapes != (means.shape, covs.shape, covs.shape):
         raise ValueError(
             f"the result's predictions and gains must have the filtered beliefs' shapes {means.shape} and {covs.shape}, "
-            f"got {result.predicted_mean.shape} and {result.smoother_gains.shape}"
+            f"got {', '.join(map(str, shapes))}"
         )
     if steps == 1:
         return SmootherResult(means, covs, jnp.zeros_like(covs))
