@@ -32,8 +32,10 @@ Metrics, per run and per half (every model runs over the whole run from the true
 0; a half is scored on its own increments, composed from the true pose at its start):
 ``motion_cm`` (RMSE of the per-frame planar step), ``distance_ratio`` (estimated path length
 over true), ``yaw_deg`` (RMSE of the per-frame turn), ``final_pct`` (final position error over
-the distance travelled), ``pitch_roll_max_deg`` and ``pitch_roll_rmse_deg`` (the attitude the
-BEVs were projected with against the levelled truth). Keys: ``runs[<run>][<variant>][<metric>]``
+the distance travelled), ``pitch_roll_max_deg``, ``pitch_roll_worst_frame`` (the run's frame of that maximum) and
+``pitch_roll_rmse_deg`` (the attitude the BEVs were projected with against the levelled truth).
+``imu_interpolated_frames[<run>]``: the run's frames whose published IMU sample is a straight line
+over an OXTS dropout (:func:`jbevo.data.kitti.interpolated_frames`). Keys: ``runs[<run>][<variant>][<metric>]``
 with ``<run>`` one of ``06``, ``06 first half``, ``06 second half`` and likewise for 07.
 Figures: ``benchmarks/results/real_kitti_<run>.png``.
 
@@ -55,6 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jbevo.data import kitti
 from jbevo.data import sequence as sq
 from jbevo.data.kitti_frames import body_from_camera_rotation
 from jbevo.data.splits import KITTI_TRAIN
@@ -129,6 +132,7 @@ def scores(increments: np.ndarray, pitch_roll: np.ndarray | None, seq: sq.Sequen
     if pitch_roll is not None:
         pr_err = np.degrees(np.asarray(pitch_roll, float)[start:stop] - np.asarray(seq.pitch_roll, float)[start:stop])
         out["pitch_roll_max_deg"] = float(np.abs(pr_err).max())
+        out["pitch_roll_worst_frame"] = start + int(np.abs(pr_err).max(axis=1).argmax())
         out["pitch_roll_rmse_deg"] = float(np.sqrt(np.mean(pr_err**2)))
     return out
 
@@ -319,6 +323,12 @@ def main() -> None:
         raise SystemExit("set JBEVO_REFERENCE_DATA to the reference data folder (with realdata/ and kitti_odom/)")
     started = time.time()
     runs = load_runs(Path(root))
+    imu = Path(root) / "kitti_odom" / "imu"
+    # The frames whose published IMU is a straight line over an OXTS dropout (frames the OXTS unit did not record).
+    dropouts = {
+        name: np.flatnonzero(kitti.interpolated_frames(kitti.read_kitti_imu(imu / f"{name}.mat", np.asarray(seq.frame_times))))
+        for name, (_, seq) in runs.items()
+    }
     table: dict[str, dict] = {}
     learned_params: dict[str, dict] = {}
 
@@ -384,6 +394,7 @@ def main() -> None:
                 ],
             },
             "runs": table,
+            "imu_interpolated_frames": {name: frames.tolist() for name, frames in dropouts.items()},
             "learned_parameters": learned_params,
             "seconds": time.time() - started,
             "device": jax.devices()[0].device_kind,

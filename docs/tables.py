@@ -833,6 +833,33 @@ def real_kitti(run: str) -> str:
     return table([f"{run}: {first['frames']} frames, {first['distance_m']:.1f} m"] + [c[1] for c in columns], rows)
 
 
+def _frame_spans(frames: list[int]) -> str:
+    """``[1, 2, 3, 7]`` as ``1-3, 7``; ``none`` if empty."""
+    spans: list[list[int]] = []
+    for f in frames:
+        if spans and f == spans[-1][1] + 1:
+            spans[-1][1] = f
+        else:
+            spans.append([f, f])
+    return ", ".join(f"{a}-{b}" if b > a else f"{a}" for a, b in spans) or "none"
+
+
+def real_kitti_imu_dropouts() -> str:
+    d = record(REAL_KITTI)
+    model = "street + robust bands"
+    rows = [
+        [
+            run,
+            _frame_spans(frames),
+            str(d["runs"][run][model]["pitch_roll_worst_frame"]),
+            f"{d['runs'][run][model]['pitch_roll_max_deg']:.2f}",
+        ]
+        for run, frames in d["imu_interpolated_frames"].items()
+    ]
+    header = ["run", "frames the published IMU interpolates", f"{model}: worst pitch/roll frame", "its error (deg)"]
+    return table(header, rows)
+
+
 def real_kitti_learned() -> str:
     d = record(REAL_KITTI)["learned_parameters"]
     rows = []
@@ -963,6 +990,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "reference_metrics": reference_metrics,
     "real_kitti_headline": real_kitti_headline,
     "real_kitti_learned": real_kitti_learned,
+    "real_kitti_imu_dropouts": real_kitti_imu_dropouts,
     "street_world_signature": street_world_signature,
     "street_world_models": street_world_models,
     "street_world_zero_shot": street_world_zero_shot,

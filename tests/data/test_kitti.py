@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from jbevo.data import kitti
+from jbevo.data.imu_stream import ImuStream
 from jbevo.data.synthetic.sequences import procedural_sequence
 from jbevo.data.synthetic.world import World
 from jbevo.geometry import camera as cam
@@ -83,3 +84,25 @@ def test_errors_name_the_file(seq, tmp_path):
     stamps.write_text("\n".join([lines[1], lines[0], *lines[2:]]) + "\n")
     with pytest.raises(ValueError, match="increasing"):
         kitti.read_raw(drive)
+
+
+def test_frames_interpolated_over_a_dropout_are_found():
+    rng = np.random.default_rng(0)
+    frames, per = 30, 10
+    rows = np.cumsum(rng.normal(0.0, 0.03, (per * (frames - 1) + 1, 6)), axis=0) + [0.0, 0.0, 0.0, 0.0, 0.0, 9.8]
+    # A dropout from frame 8 to frame 14, filled by a straight line as the published file does.
+    a, b = 8 * per, 14 * per
+    rows[a : b + 1] = rows[a] + np.linspace(0.0, 1.0, b - a + 1)[:, None] * (rows[b] - rows[a])
+    stream = ImuStream(np.arange(len(rows)) * 0.01, rows[:, 3:], rows[:, :3])
+    np.testing.assert_array_equal(np.flatnonzero(kitti.interpolated_frames(stream, per)), np.arange(9, 14))
+    # Without the dropout, the samples' own noise keeps every frame off the line.
+    noisy = rows + rng.normal(0.0, 0.03, rows.shape)
+    assert not kitti.interpolated_frames(ImuStream(stream.times, noisy[:, 3:], noisy[:, :3]), per).any()
+    # One or two frames have no interior frame to test.
+    for frames in (1, 2):
+        short = ImuStream(*(field[: per * (frames - 1) + 1] for field in stream))
+        np.testing.assert_array_equal(kitti.interpolated_frames(short, per), np.zeros(frames, bool))
+    with pytest.raises(ValueError, match="not 7 per frame"):
+        kitti.interpolated_frames(stream, 7)
+    with pytest.raises(ValueError, match="at least 1"):
+        kitti.interpolated_frames(stream, 0)

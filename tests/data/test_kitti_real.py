@@ -130,3 +130,17 @@ def test_a_calibrated_run_has_the_levelled_truth_and_the_calibrated_imu(referenc
     )
     with pytest.raises(ValueError, match="not the same drive"):
         kitti_imu.calibrated_sequence(raw, kitti_imu.calibrated_drive(poses, imu, "07", calibration=calibration))
+
+
+def test_the_published_imu_of_06_starts_with_a_dropout(reference_data):
+    # Sequence 06's published IMU is a straight line over frames 1-11; 07's has none over the
+    # run's 160 frames. Both sides stay more than an order of magnitude from the tolerance.
+    imu = reference_data / "kitti_odom" / "imu"
+    t = 0.1 * np.arange(160)
+    six, seven = (kitti.read_kitti_imu(imu / f"{name}.mat", t) for name in ("06", "07"))
+    flagged = kitti.interpolated_frames(six)
+    np.testing.assert_array_equal(np.flatnonzero(flagged), np.arange(1, 12))
+    assert not kitti.interpolated_frames(seven).any()
+    curvature = kitti.frame_curvature(six)
+    assert curvature[flagged[1:-1]].max() < kitti.INTERPOLATION_TOLERANCE / 10
+    assert min(curvature[~flagged[1:-1]].min(), kitti.frame_curvature(seven).min()) > 10 * kitti.INTERPOLATION_TOLERANCE

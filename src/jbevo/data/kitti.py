@@ -130,6 +130,41 @@ def read_kitti_imu(path: str | Path, frame_times: np.ndarray, rows_per_frame: in
     return stream.check(str(path))
 
 
+#: The largest second difference (over the six channels, m/s^2 and rad/s) of three successive
+#: frame-time samples below which the middle one counts as interpolated: the recorded samples'
+#: own noise keeps it far above this, a straight line puts it at rounding level
+#: (``tests/data/test_kitti_real.py`` checks both on sequences 06 and 07).
+INTERPOLATION_TOLERANCE = 1e-3
+
+
+def frame_curvature(stream: ImuStream, rows_per_frame: int = 10) -> np.ndarray:
+    """The second difference of a KITTI odometry IMU stream at each interior frame.
+
+    Per frame ``1 .. N-2``, the largest absolute value over the six channels (gyro, specific
+    force) of ``s[k-1] - 2 s[k] + s[k+1]``, ``s[k]`` the stream's row at frame ``k``. Zero (to
+    rounding) where the sample lies on the straight line through its neighbours'."""
+    if rows_per_frame < 1:
+        raise ValueError(f"rows_per_frame must be at least 1, got {rows_per_frame}")
+    if (len(stream.times) - 1) % rows_per_frame:
+        raise ValueError(f"the stream has {len(stream.times)} rows, not {rows_per_frame} per frame plus one")
+    at_frames = np.concatenate([stream.gyro, stream.accel], axis=1)[::rows_per_frame]
+    return np.abs(at_frames[:-2] - 2 * at_frames[1:-1] + at_frames[2:]).max(axis=1)
+
+
+def interpolated_frames(stream: ImuStream, rows_per_frame: int = 10, tolerance: float = INTERPOLATION_TOLERANCE) -> np.ndarray:
+    """Which frames of a KITTI odometry IMU stream (:func:`read_kitti_imu`) were not recorded.
+
+    The published file fills the OXTS unit's dropouts by straight lines between the samples
+    recorded around them. A frame whose :func:`frame_curvature` (second difference over all six
+    channels) is below ``tolerance`` lies on such a line. Returns a boolean per frame; only
+    interior frames can be flagged, so the recorded samples at both ends of a gap (the line's
+    knots) are not: a gap flagged at frames ``a .. b`` is one line from frame ``a - 1`` to
+    ``b + 1``."""
+    curvature = frame_curvature(stream, rows_per_frame)
+    frames = (len(stream.times) - 1) // rows_per_frame + 1
+    return np.concatenate([[False], curvature < tolerance, [False]])[:frames]
+
+
 def _imu_file(imu: str | Path, sequence: str) -> Path:
     imu = Path(imu)
     return imu / f"{sequence}.mat" if imu.is_dir() else imu
@@ -408,8 +443,11 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
 
 __all__ = [
     "EARTH_RADIUS",
+    "INTERPOLATION_TOLERANCE",
+    "frame_curvature",
     "has_imu",
     "imu_to_rectified_camera",
+    "interpolated_frames",
     "oxts_poses",
     "read_kitti_imu",
     "read_odometry",
