@@ -26,7 +26,7 @@ def localization(steps=300, seed=1):
     return seq, np.asarray(seq.poses[0]) + [0.3, -0.2, 0.05]
 
 
-def run(seq, x0, fixes=None, q=Q, scheme=MerweScaled()):
+def run(seq, x0, fixes=None, q=Q, scheme=MerweScaled(), recompute=False):
     model = planar_pose_model()
     fixes = seq.fixes if fixes is None else fixes
     result = ukf.filter(
@@ -38,7 +38,8 @@ def run(seq, x0, fixes=None, q=Q, scheme=MerweScaled()):
         jnp.asarray(R),
         scheme=scheme,
     )
-    return result, smooth(model, result, seq.increments, jnp.asarray(q), scheme=scheme)
+    given = result._replace(smoother_gains=None) if recompute else result
+    return result, smooth(model, given, seq.increments, jnp.asarray(q), scheme=scheme)
 
 
 def filterpy_smoothed(seq, x0, fixes, alpha, beta, kappa):
@@ -57,11 +58,11 @@ def assert_close_states(a, b, atol):
     assert np.abs(d).max() < atol
 
 
-@pytest.mark.parametrize("alpha,beta,kappa", [(1.0, 2.0, 0.0), (0.5, 2.0, 1.0)])
-def test_equals_filterpy_rts_smoother_with_yaw_wrapping(alpha, beta, kappa):
+@pytest.mark.parametrize("alpha,beta,kappa,recompute", [(1.0, 2.0, 0.0, False), (0.5, 2.0, 1.0, False), (0.5, 2.0, 1.0, True)])
+def test_equals_filterpy_rts_smoother_with_yaw_wrapping(alpha, beta, kappa, recompute):
     seq, x0 = localization()
     assert np.any(np.abs(np.diff(np.asarray(seq.poses[:, 2]))) > np.pi), "the drive must cross +-pi"
-    _, ours = run(seq, x0, scheme=MerweScaled(alpha, beta, kappa))
+    _, ours = run(seq, x0, scheme=MerweScaled(alpha, beta, kappa), recompute=recompute)
     means, covs = filterpy_smoothed(seq, x0, np.asarray(seq.fixes), alpha, beta, kappa)
     assert_close_states(ours.smoothed_mean, means, 1e-8)
     np.testing.assert_allclose(ours.smoothed_cov, covs, atol=1e-8)
@@ -159,7 +160,8 @@ def test_gradient_through_the_smoother_matches_finite_differences(gains):
     assert check_leaf_gradients(jax.jit(loss), grads, params, abs_tol=1e-7, rel_tol=1e-4) == 6
 
 
-def test_runs_under_jit_and_vmap_with_time_varying_noise():
+@pytest.mark.parametrize("recompute", [False, True])
+def test_runs_under_jit_and_vmap_with_time_varying_noise(recompute):
     seq, x0 = localization(50)
     model = planar_pose_model()
     q_seq = jnp.asarray(Q)[None] * jnp.linspace(0.5, 2.0, 50)[:, None, None]
@@ -169,6 +171,8 @@ def test_runs_under_jit_and_vmap_with_time_varying_noise():
         result = ukf.filter(
             model, ukf.GaussianState(jnp.asarray(x0), jnp.asarray(P0)), seq.increments, fixes, q_seq, jnp.asarray(R)
         )
+        if recompute:
+            result = result._replace(smoother_gains=None)
         return smooth(model, result, seq.increments, q_seq).smoothed_mean
 
     fixes = jnp.stack([seq.fixes, seq.fixes + 0.1])

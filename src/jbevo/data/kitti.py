@@ -132,8 +132,8 @@ def read_kitti_imu(path: str | Path, frame_times: np.ndarray, rows_per_frame: in
 
 #: The largest second difference (over the six channels, m/s^2 and rad/s) of three successive
 #: frame-time samples below which the middle one counts as interpolated: the recorded samples'
-#: own noise keeps it far above this, a straight line puts it at rounding level
-#: (``tests/data/test_kitti_real.py`` checks both on sequences 06 and 07).
+#: own noise keeps it far above this, a straight line puts it at the file's storage precision
+#: (``tests/data/test_kitti_real.py`` checks both sides on sequences 06 and 07).
 INTERPOLATION_TOLERANCE = 1e-3
 
 
@@ -141,8 +141,9 @@ def frame_curvature(stream: ImuStream, rows_per_frame: int = 10) -> np.ndarray:
     """The second difference of a KITTI odometry IMU stream at each interior frame.
 
     Per frame ``1 .. N-2``, the largest absolute value over the six channels (gyro, specific
-    force) of ``s[k-1] - 2 s[k] + s[k+1]``, ``s[k]`` the stream's row at frame ``k``. Zero (to
-    rounding) where the sample lies on the straight line through its neighbours'."""
+    force) of ``s[k-1] - 2 s[k] + s[k+1]``, ``s[k]`` the stream's row at frame ``k``. Zero, to the
+    precision the values are stored with, where the sample lies on the straight line through its
+    neighbours'."""
     if rows_per_frame < 1:
         raise ValueError(f"rows_per_frame must be at least 1, got {rows_per_frame}")
     if (len(stream.times) - 1) % rows_per_frame:

@@ -62,19 +62,23 @@ def smooth(
     Where ``result`` keeps the smoother's gains (:func:`~jbevo.filtering.ukf.filter` does: each
     is known once the step's prediction is), the backward pass reuses them and the filter's
     predictions instead of pushing sigma points through the motion again: the same quantities,
-    computed once. ``controls``, ``motion_cov`` and ``scheme`` are then only checked against the
-    result's shapes (the filter's own were used); to smooth with others, pass
-    ``result._replace(smoother_gains=None)``, which recomputes everything with them."""
+    computed once. ``controls`` and ``motion_cov`` are then only checked against the result's
+    shapes and ``scheme`` and the model's motion are not used (the filter's own were); to smooth
+    with others, pass ``result._replace(smoother_gains=None)``, which recomputes everything with
+    them. The filter's gain into step ``k + 1`` is the smoother's gain from step ``k``:
+    ``gains[k] == result.smoother_gains[k + 1]``."""
     if result.smoother_gains is None:
         return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme)
     means, covs = result.filtered_mean, result.filtered_cov
     steps, _ = _checked_inputs(means, covs, controls, motion_cov)
-    shapes = (result.predicted_mean.shape, result.predicted_cov.shape, result.smoother_gains.shape)
-    if shapes != (means.shape, covs.shape, covs.shape):
-        raise ValueError(
-            f"the result's predictions and gains must have the filtered beliefs' shapes {means.shape} and {covs.shape}, "
-            f"got {', '.join(map(str, shapes))}"
-        )
+    fields = {"predicted_mean": means.shape, "predicted_cov": covs.shape, "smoother_gains": covs.shape}
+    wrong = [
+        f"{name} {getattr(result, name).shape}, not {shape}"
+        for name, shape in fields.items()
+        if getattr(result, name).shape != shape
+    ]
+    if wrong:
+        raise ValueError(f"the result's predictions and gains must have the filtered beliefs' shapes: {'; '.join(wrong)}")
     if steps == 1:
         return SmootherResult(means, covs, jnp.zeros_like(covs))
 
