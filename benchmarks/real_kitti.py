@@ -35,7 +35,9 @@ over true), ``yaw_deg`` (RMSE of the per-frame turn), ``final_pct`` (final posit
 the distance travelled), ``pitch_roll_max_deg``, ``pitch_roll_worst_frame`` (the run's frame of that maximum) and
 ``pitch_roll_rmse_deg`` (the attitude the BEVs were projected with against the levelled truth).
 ``imu_interpolated_frames[<run>]``: the run's frames whose published IMU sample is a straight line
-over an OXTS dropout (:func:`jbevo.data.kitti.interpolated_frames`). Keys: ``runs[<run>][<variant>][<metric>]``
+over an OXTS dropout (:func:`jbevo.data.kitti.interpolated_frames`);
+``gyro_alone_drift_deg[<run>]["from_frame"][k]``: the largest pitch/roll error over the next
+``frames`` frames of the calibrated gyro integrated alone from the truth at frame ``k``. Keys: ``runs[<run>][<variant>][<metric>]``
 with ``<run>`` one of ``06``, ``06 first half``, ``06 second half`` and likewise for 07.
 Figures: ``benchmarks/results/real_kitti_<run>.png``.
 
@@ -66,7 +68,8 @@ from jbevo.files import write_json_atomic
 from jbevo.geometry.angles import wrap_angle
 from jbevo.geometry.se2 import se2_compose
 from jbevo.inertial import kitti_imu
-from jbevo.inertial.kinematics import gyro_yaw_increment
+from jbevo.inertial.attitude_filter import integrate_gyro
+from jbevo.inertial.kinematics import fill_missing, gyro_yaw_increment
 from jbevo.models import Bevo, motion_loss, relative_motion
 from jbevo.models.presets import STREET_GRID, street_model
 from jbevo.models.runners import run_bevo
@@ -134,6 +137,28 @@ def scores(increments: np.ndarray, pitch_roll: np.ndarray | None, seq: sq.Sequen
         out["pitch_roll_max_deg"] = float(np.abs(pr_err).max())
         out["pitch_roll_worst_frame"] = start + int(np.abs(pr_err).max(axis=1).argmax())
         out["pitch_roll_rmse_deg"] = float(np.sqrt(np.mean(pr_err**2)))
+    return out
+
+
+#: Frames over which :func:`gyro_alone_drift` integrates the calibrated gyro from the truth (1 s).
+GYRO_WINDOW = 10
+
+
+def gyro_alone_drift(seq: sq.Sequence, frames: int = GYRO_WINDOW) -> list[float]:
+    """Per start frame ``k``: the largest pitch/roll error (deg) over frames ``k + 1 .. k + frames``
+    of the calibrated gyro integrated alone from the truth's attitude at ``k``. Where the IMU
+    and the truth agree it stays at hundredths of a degree; where they disagree, no filter that
+    follows the gyro can match the truth."""
+    step = jax.jit(lambda pr, gyro: integrate_gyro(pr, fill_missing(gyro), seq.imu_dt))
+    truth = np.asarray(seq.pitch_roll, float)
+    gyro = jnp.asarray(seq.gyro)
+    out = []
+    for k in range(seq.num_frames - frames):
+        pr, worst = jnp.asarray(truth[k]), 0.0
+        for t in range(k + 1, k + frames + 1):
+            pr = step(pr, gyro[t])
+            worst = max(worst, float(np.degrees(np.abs(np.asarray(pr, float) - truth[t])).max()))
+        out.append(worst)
     return out
 
 
@@ -395,6 +420,9 @@ def main() -> None:
             },
             "runs": table,
             "imu_interpolated_frames": {name: frames.tolist() for name, frames in dropouts.items()},
+            "gyro_alone_drift_deg": {
+                name: {"frames": GYRO_WINDOW, "from_frame": gyro_alone_drift(seq)} for name, (_, seq) in runs.items()
+            },
             "learned_parameters": learned_params,
             "seconds": time.time() - started,
             "device": jax.devices()[0].device_kind,
