@@ -1,7 +1,8 @@
 """The road's tilt as a state (jbevo.models.road_tilt): its walk and update, its gradient, and,
 on a drive whose camera looks at the road 0.4 deg further down than the IMU's level says (a
 grade the IMU cannot see), BEVO with bands finds the tilt while its pitch against gravity stays
-true; the plain band update instead pulls the gravity pitch off."""
+true; the plain band update instead pulls the gravity pitch off. Below the bands' travel gate,
+keyframes let them find it too."""
 
 import dataclasses
 
@@ -53,21 +54,31 @@ def test_gradient_of_the_walk(float64):
     assert float(grad) == pytest.approx(float(fd), rel=1e-6) and float(grad) > 0
 
 
-@pytest.fixture(scope="module")
-def tilted_view():
-    """A level straight drive at 1.2 m per frame (noiseless IMU) whose KITTI camera is mounted
-    0.4 deg nose down, read back with the level camera: to the model, a road falling 0.4 deg."""
+def _tilted_drive(world, step, n):
+    """A level straight drive at ``step`` metres per frame (noiseless IMU) whose KITTI camera is
+    mounted 0.4 deg nose down, read back with the level camera: to the model, a road falling
+    0.4 deg."""
     nominal = Camera.kitti()
     mounted = eqx.tree_at(
         lambda c: c.rotation_body_to_camera,
         nominal,
         jnp.asarray(FORWARD, jnp.float32) @ level_to_body(jnp.float32(TILT), jnp.float32(0.0)).T,
     )
-    n = 16
-    x = 20.0 + 1.2 * np.arange(n)
+    x = 20.0 + step * np.arange(n)
     poses = poses_from_euler(np.zeros((n, 3)), np.stack([x, np.full(n, 30.0), np.full(n, 1.65)], -1))
-    seq = make_sequence(World.create("town01", size=1024), mounted, np.arange(n) * 0.1, poses, "day", NOISELESS, smoothing=None)
+    seq = make_sequence(world, mounted, np.arange(n) * 0.1, poses, "day", NOISELESS, smoothing=None)
     return eqx.tree_at(lambda s: s.camera, seq, nominal)
+
+
+@pytest.fixture(scope="module")
+def world():
+    return World.create("town01", size=1024)
+
+
+@pytest.fixture(scope="module")
+def tilted_view(world):
+    """The tilted road at 1.2 m per frame."""
+    return _tilted_drive(world, 1.2, 16)
 
 
 def _tilt_and_pitch(model, seq):
@@ -97,3 +108,34 @@ def test_bands_find_the_road_tilt_and_leave_the_gravity_pitch_alone(tilted_view)
     assert np.abs(pitch - truth).max() < np.radians(0.01)
     _, pitch = _tilt_and_pitch(robust, tilted_view)
     assert np.all(np.abs(TILT - (pitch[-8:] - truth[-8:])) > np.radians(0.2))
+
+
+def _street_bands(seq, keyframes):
+    """The real-street bands (robust, engaged from 1 m, road tilt) on the tilted drive's grid."""
+    model = Bevo.create(BevGrid(0.1, (256, 256), near=4.0), seq.imu_dt, n_angles=256, road_tilt=True)
+    return dataclasses.replace(model, bands=BandGeometry.create(robust=True, min_travel=1.0, keyframes=keyframes))
+
+
+def test_keyframes_find_the_road_tilt_below_the_travel_gate(world):
+    """At 0.4 m per frame the bands engaged from 1 m per frame never see the tilted road, and the
+    unmeasured grade pulls the gravity pitch off through the odometry's speed (by 0.03 deg here);
+    with keyframes they measure it over every third frame (1.2 m) and find it within 0.1 deg (the
+    mean of the last nine frames), the gravity pitch true to 0.01 deg."""
+    slow = _tilted_drive(world, 0.4, 25)
+    truth = np.asarray(slow.pitch_roll[:, 0])
+    tilt, pitch = _tilt_and_pitch(_street_bands(slow, keyframes=False), slow)
+    assert np.all(tilt == 0.0) and np.abs(pitch - truth).max() > np.radians(0.02)
+    tilt, pitch = _tilt_and_pitch(_street_bands(slow, keyframes=True), slow)
+    assert np.all(tilt[:3] == 0.0) and tilt[3] != 0.0  # the first keyframe pair spans 1.2 m
+    assert abs(np.mean(tilt[-9:]) - TILT) < np.radians(0.1)
+    assert np.abs(pitch - truth).max() < np.radians(0.01)
+
+
+def test_keyframes_change_nothing_above_the_travel_gate(tilted_view):
+    """At 1.2 m per frame every frame engages the bands, so the keyframe is always the previous
+    frame: the same run as without keyframes (to float32 round-off, which XLA's different fusion
+    of the two programs moves, and DPC's peaks carry along the run)."""
+    plain = eqx.filter_jit(lambda m, s: m(s, warm_start=True))(_street_bands(tilted_view, False), tilted_view)
+    keyed = eqx.filter_jit(lambda m, s: m(s, warm_start=True))(_street_bands(tilted_view, True), tilted_view)
+    np.testing.assert_allclose(keyed.increments, plain.increments, atol=1e-4)
+    np.testing.assert_allclose(keyed.pitch_roll, plain.pitch_roll, atol=1e-6)

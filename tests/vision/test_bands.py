@@ -169,6 +169,32 @@ def test_below_min_travel_the_bands_stand_aside(moving):
         BandGeometry.create(min_travel=-1.0)
 
 
+def test_keyframes_need_a_travel_gate():
+    with pytest.raises(ValueError, match="keyframes need a positive min_travel"):
+        BandGeometry.create(keyframes=True)
+    assert BandGeometry.create(min_travel=1.0, keyframes=True).keyframes
+
+
+def test_a_known_pitch_drift_is_removed_from_the_slope(moving):
+    """The previous BEV projected 0.1 deg above the current one (both otherwise true): the slope
+    reads the drift as a pitch error of over a degree (the drift's lever is the far band's
+    distance). Removing the drift, as a keyframe's pair does with the filter's corrections since
+    the keyframe, takes most of that reading away (the model is first order in the distance
+    moments; DPC's peak on the blurred far band sits nearer), and removing it with the wrong sign
+    makes it worse."""
+    drift = np.radians(0.1)
+    _, shifts = pair(moving, (drift, 0.0), (0.0, 0.0))
+    bands = BandGeometry.create()
+
+    def reads(s):  # the pitch error a slope reads at D = 1 m
+        return -slope(s) * H / 2.0
+
+    raw = reads(shifts)
+    assert raw > np.radians(1.0)
+    assert abs(reads(bands.remove_drift(shifts, GRID, DPC, jnp.asarray(H), jnp.asarray(drift)))) < 0.35 * raw
+    assert reads(bands.remove_drift(shifts, GRID, DPC, jnp.asarray(H), jnp.asarray(-drift))) > 1.5 * raw
+
+
 def test_a_pitch_drift_at_standstill_reads_as_gyro_bias(standing):
     """Standing still, the previous BEV 0.2 deg above the current one: nothing moved, so the
     stretch can only be a pitch drift, which the model reads as a pitch-rate bias estimate

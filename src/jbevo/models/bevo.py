@@ -22,6 +22,10 @@ far halves of the BEV pair: their forward-shift slope updates the filter's pitch
 bias before the odometry's speed does, the forward motion is extrapolated to where a pitch error
 has no effect, the rotation is corrected by the bands' lateral shifts (a roll error's false
 turn), and this frame's image is projected again with the updated attitude for the next frame.
+With keyframes (:attr:`jbevo.vision.bands.BandGeometry.keyframes`), a frame below the bands'
+travel gate leaves the band pair to the last BEV they engaged at, until the travel since reaches
+the gate: a slow car measures the slope over several frames; the filter's pitch corrections since
+that BEV are taken out of the pair's slope (:meth:`jbevo.vision.bands.BandGeometry.remove_drift`).
 
 Why speed-aided: the accelerometer's forward axis reads ``dv/dt - g sin(pitch)``, so its tilt is
 off by ``dv/dt / g`` (2 m/s^2: 11.5 deg) whenever the car speeds up or brakes, and the BEV needs
@@ -54,7 +58,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int, UInt8
+from jaxtyping import Array, Bool, Float, Int, UInt8
 
 from jbevo.data.sequence import Sequence
 from jbevo.filtering.ukf import GaussianState
@@ -85,6 +89,18 @@ class Frame(NamedTuple):
     number: Int[Array, ""]  #: the frame's index in the sequence (0: no previous BEV)
 
 
+class Keyframe(NamedTuple):
+    """The BEV the bands compare with when they hold keyframes
+    (:attr:`jbevo.vision.bands.BandGeometry.keyframes`; an empty BEV without)."""
+
+    bev: Float[Array, "h w"]  #: the keyframe's BEV, as the carry kept it
+    turn: Float[Array, ""]  #: the gyro's turn from the keyframe to the previous frame (radians)
+    age: Int[Array, ""]  #: frames from the keyframe to the previous frame (0: it is the previous frame)
+    #: the pitch corrections the filter made after the keyframe's BEV was projected (radians): the
+    #: estimate's change that the gyro did not make, which the band pair would read as a slope
+    pitch_drift: Float[Array, ""]
+
+
 class BevoCarry(NamedTuple):
     """What the recursion carries from frame to frame."""
 
@@ -92,6 +108,7 @@ class BevoCarry(NamedTuple):
     bev: Float[Array, "h w"]  #: the previous frame's (feathered) BEV
     pose: Float[Array, " 3"]  #: the planar pose (x, y, yaw)
     road_tilt: GaussianState  #: the road's tilt along the heading (level and unused without ``road_tilt``)
+    keyframe: Keyframe  #: the bands' keyframe (unused without keyframes)
 
 
 class Observation(NamedTuple):
@@ -103,6 +120,8 @@ class Observation(NamedTuple):
     bev: Float[Array, "h w"]  #: that BEV
     increment: Float[Array, " 3"]  #: (dx, dy, dyaw) from the previous frame (body frame; 0 at frame 0)
     confidence: Float[Array, ""]  #: DPC's confidence (0 at frame 0)
+    gyro_turn: Float[Array, ""]  #: the gyro's yaw increment over the frame (radians)
+    keyframe: Bool[Array, ""]  #: this frame becomes the bands' keyframe (with keyframes)
 
 
 class BevoOutput(NamedTuple):
@@ -221,7 +240,11 @@ class Bevo(eqx.Module):
         )
         attitude = self.initial_attitude(seq, warm_start).astype(dtype)
         tilt = (self.road_tilt or RoadTilt.create()).initial(dtype)
-        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype), tilt)
+        zero = jnp.zeros((), dtype)
+        keyframe = Keyframe(
+            jnp.zeros(self.grid.shape if self._keyframes else (0, 0), dtype), zero, jnp.zeros((), jnp.int32), zero
+        )
+        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype), tilt, keyframe)
         frames = Frame(seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         return carry, frames, seq
 
@@ -273,6 +296,10 @@ class Bevo(eqx.Module):
         """The camera's height above the road the BEV assumes (metres)."""
         return jnp.asarray(camera.height if self.road is None else self.road.height(camera), dtype)
 
+    @property
+    def _keyframes(self) -> bool:
+        return self.bands is not None and self.bands.keyframes
+
     def _register(self, prev: Array, bev: Array, gyro_turn: Array) -> Registration:
         if self.gyro_window > 0:
             return register(prev, bev, self.dpc, rotation_prior=-gyro_turn, prior_window=self.gyro_window)
@@ -293,15 +320,29 @@ class Bevo(eqx.Module):
         reg = self._register(carry.bev, bev, gyro_turn)
         moving = frame.number > 0
         rotation, translation = reg.rotation, reg.translation
+        keyframe = ~moving
         if self.bands is not None:
             height = self.camera_height(camera, bev.dtype)
-            shifts = self.bands.shifts(carry.bev, bev, reg, self.grid, self.dpc)
+            # The band pair: the previous BEV, or with keyframes the keyframe's (the previous
+            # BEV when it is the keyframe, age 0).
+            earlier, pair, key_dt, consecutive = carry.bev, reg, frame_dt, jnp.bool_(True)
+            if self._keyframes:
+                key = carry.keyframe
+                earlier = key.bev
+                pair = self._register(earlier, bev, key.turn.astype(gyro_turn.dtype) + gyro_turn)
+                key_dt, consecutive = frame_dt * (key.age + 1).astype(bev.dtype), key.age == 0
+            shifts = self.bands.shifts(earlier, bev, pair, self.grid, self.dpc)
             engaged = moving
             if self.bands.min_travel > 0:
-                engaged = moving & (bev_increment(self.grid, reg.rotation, reg.translation)[0] >= self.bands.min_travel)
+                engaged = moving & (bev_increment(self.grid, pair.rotation, pair.translation)[0] >= self.bands.min_travel)
+            keyframe = keyframe | engaged
             measured = belief
             if self.attitude_source == "filter":
-                slope = self.bands.slope_measurement(shifts, self.grid, self.dpc, height, frame_dt)
+                # The keyframe's pitch relative to this BEV's that the filter's corrections since
+                # the keyframe account for (zero for the previous BEV, projected again after them).
+                known = -carry.keyframe.pitch_drift.astype(bev.dtype)
+                slope_shifts = self.bands.remove_drift(shifts, self.grid, self.dpc, height, known) if self._keyframes else shifts
+                slope = self.bands.slope_measurement(slope_shifts, self.grid, self.dpc, height, key_dt)
                 if self.road_tilt is None:
                     h = AttitudeState.row(pitch=slope.pitch, pitch_rate_bias=slope.pitch_rate_bias, dtype=belief.mean.dtype)
                     measured = self.attitude.update_linear(belief, h, slope.value, slope.variance, engaged & slope.valid)
@@ -309,16 +350,19 @@ class Bevo(eqx.Module):
                     tilt = self.road_tilt.update(tilt, slope, engaged & slope.valid)
             # The previous BEV's pitch relative to this one's, as the update estimates it.
             drift = ((belief.pitch_rate_bias - measured.pitch_rate_bias) * frame_dt).astype(bev.dtype)
-            banded = self.bands.motion(shifts, reg, self.grid, self.dpc, height, drift)
-            rotation = jnp.where(engaged, banded[0], rotation)
-            translation = jnp.where(engaged, banded[1], translation)
+            banded = self.bands.motion(shifts, pair, self.grid, self.dpc, height, drift)
+            # A keyframe's pair spans several frames: the frame's own motion is then the full
+            # registration's between consecutive BEVs.
+            rotation = jnp.where(engaged & consecutive, banded[0], rotation)
+            translation = jnp.where(engaged & consecutive, banded[1], translation)
             belief = measured
         if self.yaw_fusion is not None:
             rotation = self.yaw_fusion.fuse(rotation, gyro_turn.astype(rotation.dtype))
         increment = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
         belief = self.attitude.update_speed(belief, jnp.where(moving, increment[0] / frame_dt, jnp.nan))
         belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
-        return Observation(belief, tilt, pitch_roll, bev, increment, jnp.where(moving, reg.confidence, 0.0))
+        confidence = jnp.where(moving, reg.confidence, 0.0)
+        return Observation(belief, tilt, pitch_roll, bev, increment, confidence, gyro_turn.astype(bev.dtype), keyframe)
 
     def _on_road(self, pitch_roll: Float[Array, " 2"], tilt: GaussianState) -> Float[Array, " 2"]:
         """The body's ``pitch_roll`` with the road's tilt added to the pitch (with ``road_tilt``)."""
@@ -342,9 +386,25 @@ class Bevo(eqx.Module):
         attitude = observation.attitude if attitude is None else attitude
         reproject = self.bands is not None if reproject is None else reproject
         bev = observation.bev
-        if reproject and self.attitude_source == "filter":
+        reproject = reproject and self.attitude_source == "filter"
+        if reproject:
             bev = self.bev(frame.image, self._on_road(attitude.pitch_roll.astype(bev.dtype), observation.road_tilt), camera)
-        new = BevoCarry(attitude, bev, se2_compose(carry.pose, observation.increment), observation.road_tilt)
+        keyframe = carry.keyframe
+        if self._keyframes:
+            # The filter's corrections to its pitch (the road's tilt changes only at a keyframe)
+            # accumulate until the next keyframe, whose BEV, projected again, has them.
+            reset = observation.keyframe
+            correction = jnp.zeros((), bev.dtype)
+            if self.attitude_source == "filter":
+                correction = (attitude.pitch_roll[0] - observation.pitch_roll[0]).astype(bev.dtype)
+                correction = jnp.where(reset & reproject, 0.0, correction)
+            keyframe = Keyframe(
+                jnp.where(reset, bev, keyframe.bev),
+                jnp.where(reset, 0.0, keyframe.turn + observation.gyro_turn),
+                jnp.where(reset, 0, keyframe.age + 1),
+                jnp.where(reset, 0.0, keyframe.pitch_drift) + correction,
+            )
+        new = BevoCarry(attitude, bev, se2_compose(carry.pose, observation.increment), observation.road_tilt, keyframe)
         # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
         return jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), new, carry)
 
@@ -377,4 +437,4 @@ class Bevo(eqx.Module):
         return outputs
 
 
-__all__ = ["ATTITUDE_SOURCES", "Bevo", "BevoCarry", "BevoOutput", "Frame", "Observation"]
+__all__ = ["ATTITUDE_SOURCES", "Bevo", "BevoCarry", "BevoOutput", "Frame", "Keyframe", "Observation"]

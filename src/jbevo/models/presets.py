@@ -41,7 +41,11 @@ STREET_BANDS_MIN_TRAVEL = 1.0
 
 
 def street_model(
-    imu_dt: float, grid: BevGrid = STREET_GRID, bands: bool = True, bands_min_travel: float = STREET_BANDS_MIN_TRAVEL
+    imu_dt: float,
+    grid: BevGrid = STREET_GRID,
+    bands: bool = True,
+    bands_min_travel: float = STREET_BANDS_MIN_TRAVEL,
+    bands_keyframes: bool = False,
 ) -> Bevo:
     """The hand-set BEVO for real streets (KITTI-size frames with a calibrated IMU): the road view
     (:class:`jbevo.vision.road_view.RoadView`: camera against the road, road corridor), the gyro's
@@ -50,7 +54,7 @@ def street_model(
     engaged from ``bands_min_travel`` metres per frame, measuring the road's tilt
     (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity."""
     model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True, road_tilt=bands)
-    geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel) if bands else None
+    geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel, keyframes=bands_keyframes) if bands else None
     return dataclasses.replace(model, bands=geometry)
 
 

@@ -110,22 +110,39 @@ class BandGeometry(eqx.Module):
     ``min_travel`` (static, metres per frame; 0: always on): below it (the full registration's
     forward motion) :class:`jbevo.models.bevo.Bevo` neither updates the attitude with the slope
     nor takes the bands' motion, but the full registration's. The slope's pitch coefficient
-    ``2 D / h`` vanishes with the travel ``D`` while its noise does not."""
+    ``2 D / h`` vanishes with the travel ``D`` while its noise does not.
+
+    ``keyframes`` (static; needs ``min_travel`` > 0): below ``min_travel`` per frame the bands
+    compare the current BEV with the last one at which they engaged (the keyframe) instead of
+    the previous one, and engage once the travel since the keyframe reaches ``min_travel``: a
+    slow car measures the slope over a baseline of at least ``min_travel`` metres, spread over
+    several frames, instead of never. The motion of a frame whose keyframe is not the previous
+    frame stays the full registration's between consecutive BEVs."""
 
     log_slope_std: Float[Array, ""]
     log_yaw_gain: Float[Array, ""]
     robust: bool = eqx.field(static=True, default=False)
     min_travel: float = eqx.field(static=True, default=0.0)
+    keyframes: bool = eqx.field(static=True, default=False)
 
     @classmethod
     def create(
-        cls, slope_std: float = 0.003, yaw_gain: float = 1.3, robust: bool = False, min_travel: float = 0.0
+        cls,
+        slope_std: float = 0.003,
+        yaw_gain: float = 1.3,
+        robust: bool = False,
+        min_travel: float = 0.0,
+        keyframes: bool = False,
     ) -> BandGeometry:
         if not (slope_std > 0 and yaw_gain > 0):
             raise ValueError(f"slope_std and yaw_gain must be positive, got {slope_std}, {yaw_gain}")
         if not min_travel >= 0:
             raise ValueError(f"min_travel must be non-negative, got {min_travel}")
-        return cls(jnp.log(jnp.float32(slope_std)), jnp.log(jnp.float32(yaw_gain)), bool(robust), float(min_travel))
+        if keyframes and not min_travel > 0:
+            raise ValueError("keyframes need a positive min_travel (the baseline a keyframe is kept for)")
+        return cls(
+            jnp.log(jnp.float32(slope_std)), jnp.log(jnp.float32(yaw_gain)), bool(robust), float(min_travel), bool(keyframes)
+        )
 
     def shifts(
         self, prev: Float[Array, "h w"], bev: Float[Array, "h w"], reg: Registration, grid: BevGrid, params: DPCParams
@@ -150,11 +167,12 @@ class BandGeometry(eqx.Module):
         return (forward[1] - x_near * slope) / (1.0 + 0.5 * slope)
 
     def slope_measurement(
-        self, shifts: BandShifts, grid: BevGrid, params: DPCParams, height: Float[Array, ""], frame_dt: float
+        self, shifts: BandShifts, grid: BevGrid, params: DPCParams, height: Float[Array, ""], frame_dt: float | Float[Array, ""]
     ) -> SlopeMeasurement:
         """The forward-shift slope of the band pair as a scalar measurement of the attitude the
         current BEV was projected with (module docstring): ``m = [2 D (p - p_hat) + c T (b_y -
-        b_hat_y)] / h``, whose prediction at that attitude is zero."""
+        b_hat_y)] / h``, whose prediction at that attitude is zero. ``frame_dt`` is the time
+        between the two BEVs (several frames from a keyframe)."""
         (x_far, x_near), (m2_far, m2_near) = (
             band_moments(grid, params.window_taper, 1),
             band_moments(grid, params.window_taper, 2),
@@ -174,6 +192,24 @@ class BandGeometry(eqx.Module):
             valid=valid,
         )
 
+    def remove_drift(self, shifts: BandShifts, grid: BevGrid, params: DPCParams, height: Array, drift: Array) -> BandShifts:
+        """The band shifts without what a pitch ``drift`` of the earlier BEV relative to the later
+        one (radians, the ``d`` of the module docstring) adds to them: ``d ((x + D)^2 + h^2) / h``
+        averaged over each band, at the travel ``D`` the shifts give."""
+        (x_far, x_near), (m2_far, m2_near) = (
+            band_moments(grid, params.window_taper, 1),
+            band_moments(grid, params.window_taper, 2),
+        )
+        travel = self._extrapolate(shifts.forward, grid, params)
+        h2 = height**2
+        forward = shifts.forward + drift / height * jnp.stack(
+            [
+                m2_far + 2.0 * travel * x_far + travel**2 + h2,
+                m2_near + 2.0 * travel * x_near + travel**2 + h2,
+            ]
+        )
+        return shifts._replace(forward=forward)
+
     def motion(
         self, shifts: BandShifts, reg: Registration, grid: BevGrid, params: DPCParams, height: Array, drift: Array
     ) -> tuple[Array, Float[Array, " 2"]]:
@@ -182,19 +218,8 @@ class BandGeometry(eqx.Module):
         previous BEV's pitch ``drift`` relative to the current one (radians, the estimated
         ``(b_hat - b) T``), the rotation corrected by the bands' lateral shifts, and the lateral
         translation taken at the BEV's centre row."""
-        (x_far, x_near), (m2_far, m2_near) = (
-            band_moments(grid, params.window_taper, 1),
-            band_moments(grid, params.window_taper, 2),
-        )
-        travel0 = self._extrapolate(shifts.forward, grid, params)
-        h2 = height**2
-        forward = shifts.forward + drift / height * jnp.stack(
-            [
-                m2_far + 2.0 * travel0 * x_far + travel0**2 + h2,
-                m2_near + 2.0 * travel0 * x_near + travel0**2 + h2,
-            ]
-        )
-        travel = self._extrapolate(forward, grid, params)
+        x_far, x_near = band_moments(grid, params.window_taper, 1)
+        travel = self._extrapolate(self.remove_drift(shifts, grid, params, height, drift).forward, grid, params)
         lat_far, lat_near = shifts.lateral[0], shifts.lateral[1]
         turn = (lat_far - lat_near) / (x_far - x_near)
         x_centre = (grid.origin[0] - (grid.shape[0] - 1) / 2) * grid.resolution
