@@ -885,6 +885,12 @@ def real_kitti_imu_dropouts() -> str:
     return table(header, rows)
 
 
+def real_kitti_keyframes_speed() -> str:
+    speed = record(REAL_KITTI)["frames_per_s"]
+    ratios = [v["street + robust bands, keyframes"] / v["street + robust bands"] for v in speed.values()]
+    return f"{min(ratios):.2f}-{max(ratios):.2f}x"
+
+
 def real_kitti_learned() -> str:
     d = record(REAL_KITTI)["learned_parameters"]
     rows = []
@@ -964,6 +970,15 @@ def street_world_zero_shot() -> str:
     return table(["final error on the real frames (%)", "06", "06, 2nd half", "07", "07, 2nd half"], rows)
 
 
+def street_world_keyframes() -> str:
+    d = record(STREET_WORLD)["keyframes_check"]
+    models = next(iter(d.values()))
+    segments = ("whole", "first half", "second half")
+    header = ["street-world drive (distance ratio / final error)"] + [f"{m}: {s}" for m in models for s in segments]
+    rows = [[f"KITTI {drive}'s motion"] + [_ratio_final(d[drive][m][s]) for m in models for s in segments] for drive in d]
+    return table(header, rows)
+
+
 def street_world_minutes() -> str:
     return f"{record(STREET_WORLD)['seconds'] / 60:.0f}"
 
@@ -1019,6 +1034,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "street_world_signature": street_world_signature,
     "street_world_models": street_world_models,
     "street_world_zero_shot": street_world_zero_shot,
+    "street_world_keyframes": street_world_keyframes,
     **{
         f"real_kitti_{run.replace(' ', '_')}": (lambda run=run: real_kitti(run))
         for run in ("06", "06 first half", "06 second half", "07", "07 first half", "07 second half")
@@ -1041,5 +1057,6 @@ VALUES: dict[str, Callable[[], str]] = {
     "localization_wins_street": lambda: localization_wins(LOCALIZATION_STREET),
     "localization_wins": localization_wins,
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
+    "real_kitti_keyframes_speed": real_kitti_keyframes_speed,
     "street_world_minutes": street_world_minutes,
 }
