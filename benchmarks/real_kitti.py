@@ -16,8 +16,8 @@ and without bands, on the uncalibrated and the calibrated IMU; ``street`` is
 the gyro's turn fused with DPC's; where named, robust bands engaged from 1 m per frame that
 measure the road's tilt) with the filter's, the true (levelled) or a zero attitude; the band
 rows also without the road tilt (the slope then corrects the pitch against gravity), engaged
-from 0.5 m per frame or at any speed, and with keyframes (below 1 m per frame the bands compare
-with the last BEV they engaged at, once the travel since reaches 1 m). Learned rows fit on one half of a run and are scored on the other
+from 0.5 m per frame or at any speed, and with keyframes (the band pair is the current BEV and
+the last one at which the bands engaged; they engage once the travel since reaches 1 m). Learned rows fit on one half of a run and are scored on the other
 (both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
 ``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
 ``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11),

@@ -54,15 +54,15 @@ def test_gradient_of_the_walk(float64):
     assert float(grad) == pytest.approx(float(fd), rel=1e-6) and float(grad) > 0
 
 
-def _tilted_drive(world, step, n):
+def _tilted_drive(world, step, n, tilt=TILT):
     """A level straight drive at ``step`` metres per frame (noiseless IMU) whose KITTI camera is
-    mounted 0.4 deg nose down, read back with the level camera: to the model, a road falling
-    0.4 deg."""
+    mounted ``tilt`` (0.4 deg) nose down, read back with the level camera: to the model, a road
+    falling 0.4 deg."""
     nominal = Camera.kitti()
     mounted = eqx.tree_at(
         lambda c: c.rotation_body_to_camera,
         nominal,
-        jnp.asarray(FORWARD, jnp.float32) @ level_to_body(jnp.float32(TILT), jnp.float32(0.0)).T,
+        jnp.asarray(FORWARD, jnp.float32) @ level_to_body(jnp.float32(tilt), jnp.float32(0.0)).T,
     )
     x = 20.0 + step * np.arange(n)
     poses = poses_from_euler(np.zeros((n, 3)), np.stack([x, np.full(n, 30.0), np.full(n, 1.65)], -1))
@@ -110,10 +110,10 @@ def test_bands_find_the_road_tilt_and_leave_the_gravity_pitch_alone(tilted_view)
     assert np.all(np.abs(TILT - (pitch[-8:] - truth[-8:])) > np.radians(0.2))
 
 
-def _street_bands(seq, keyframes):
+def _street_bands(seq, keyframes, robust=True):
     """The real-street bands (robust, engaged from 1 m, road tilt) on the tilted drive's grid."""
     model = Bevo.create(BevGrid(0.1, (256, 256), near=4.0), seq.imu_dt, n_angles=256, road_tilt=True)
-    return dataclasses.replace(model, bands=BandGeometry.create(robust=True, min_travel=1.0, keyframes=keyframes))
+    return dataclasses.replace(model, bands=BandGeometry.create(robust=robust, min_travel=1.0, keyframes=keyframes))
 
 
 def test_keyframes_find_the_road_tilt_below_the_travel_gate(world):
@@ -139,3 +139,29 @@ def test_keyframes_change_nothing_above_the_travel_gate(tilted_view):
     keyed = eqx.filter_jit(lambda m, s: m(s, warm_start=True))(_street_bands(tilted_view, True), tilted_view)
     np.testing.assert_allclose(keyed.increments, plain.increments, atol=1e-4)
     np.testing.assert_allclose(keyed.pitch_roll, plain.pitch_roll, atol=1e-6)
+
+
+def test_a_keyframe_pairs_slope_is_read_net_of_the_filters_corrections(world):
+    """A keyframe BEV projected 0.05 deg off the truth in pitch, the current one at the filter's
+    (true) prediction, 1.2 m apart on a level road: the road tilt the pair measures (plain band
+    update) is half a degree when the keyframe's error is unknown; when the keyframe records that
+    the filter corrected its pitch by -0.05 deg since its BEV was projected, most of it goes
+    (``remove_drift`` is first order in the band distances and overshoots by about a third, as in
+    ``tests/vision/test_bands.py``), and with the wrong sign it grows."""
+    level = _tilted_drive(world, 1.2, 3, tilt=0.0)
+    model = _street_bands(level, keyframes=True, robust=False)
+    carry, frames, seq = model.start(level, warm_start=True)
+    frame_dt = model.frame_dt(seq)
+    carry, _ = model.step(carry, jax.tree_util.tree_map(lambda a: a[0], frames), seq.camera, frame_dt)
+    offset = np.radians(0.05)
+    key_bev = model.bev(frames.image[0], jnp.asarray(level.pitch_roll[0]) + jnp.array([offset, 0.0]), seq.camera)
+    observe = jax.jit(lambda c: model.observe(c, jax.tree_util.tree_map(lambda a: a[1], frames), seq.camera, frame_dt))
+
+    def tilt_read(pitch_drift):
+        key = carry.keyframe._replace(bev=key_bev, pitch_drift=jnp.float32(pitch_drift))
+        return float(observe(carry._replace(keyframe=key)).road_tilt.mean[0])
+
+    unknown, net, wrong = tilt_read(0.0), tilt_read(-offset), tilt_read(offset)
+    assert abs(unknown) > np.radians(0.3)
+    assert abs(net) < 0.45 * abs(unknown)
+    assert abs(wrong) > 1.5 * abs(unknown)

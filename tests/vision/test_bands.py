@@ -177,8 +177,8 @@ def test_keyframes_need_a_travel_gate():
 
 def test_a_known_pitch_drift_is_removed_from_the_slope(moving):
     """The previous BEV projected 0.1 deg above the current one (both otherwise true): the slope
-    reads the drift as a pitch error of over a degree (the drift's lever is the far band's
-    distance). Removing the drift, as a keyframe's pair does with the filter's corrections since
+    reads the drift as a pitch error of over a degree (the drift's lever is the bands' distance
+    ahead, the pitch error's the travel). Removing the drift, as a keyframe's pair does with the filter's corrections since
     the keyframe, takes most of that reading away (the model is first order in the distance
     moments; DPC's peak on the blurred far band sits nearer), and removing it with the wrong sign
     makes it worse."""

@@ -22,10 +22,10 @@ far halves of the BEV pair: their forward-shift slope updates the filter's pitch
 bias before the odometry's speed does, the forward motion is extrapolated to where a pitch error
 has no effect, the rotation is corrected by the bands' lateral shifts (a roll error's false
 turn), and this frame's image is projected again with the updated attitude for the next frame.
-With keyframes (:attr:`jbevo.vision.bands.BandGeometry.keyframes`), a frame below the bands'
-travel gate leaves the band pair to the last BEV they engaged at, until the travel since reaches
-the gate: a slow car measures the slope over several frames; the filter's pitch corrections since
-that BEV are taken out of the pair's slope (:meth:`jbevo.vision.bands.BandGeometry.remove_drift`).
+With keyframes (:attr:`jbevo.vision.bands.BandGeometry.keyframes`), the band pair is this BEV and
+the last one at which the bands engaged, and they engage once the travel since reaches their gate:
+a slow car measures the slope over several frames. The filter's pitch corrections since that BEV
+are taken out of the pair's slope (:meth:`jbevo.vision.bands.BandGeometry.remove_drift`).
 
 Why speed-aided: the accelerometer's forward axis reads ``dv/dt - g sin(pitch)``, so its tilt is
 off by ``dv/dt / g`` (2 m/s^2: 11.5 deg) whenever the car speeds up or brakes, and the BEV needs
@@ -309,7 +309,8 @@ class Bevo(eqx.Module):
         """One frame's odometry, top to bottom, on one attitude belief: the IMU prediction (and
         the road tilt's walk), the BEV at the predicted attitude, DPC against the previous BEV,
         then the measurement updates (the bands' pitch and pitch-rate bias, or the road's tilt,
-        from the bands engaged at this frame's travel; the odometry's speed; the lateral tilt)."""
+        from the bands engaged at this frame's travel, or with keyframes at the travel since the
+        keyframe; the odometry's speed; the lateral tilt)."""
         belief = self.attitude.predict(carry.attitude, frame.gyro, frame.accel)
         pitch_roll = self.projection_attitude(belief, frame)
         tilt = carry.road_tilt
@@ -382,7 +383,9 @@ class Bevo(eqx.Module):
         """The carry for the next frame: the final ``attitude`` (default: the observation's),
         this frame's BEV, projected once more at that attitude when ``reproject`` (default: with
         bands; BEVO+ re-projects after the map's pitch) and the filter sets the attitude (so the
-        next BEV pair differs by the gyro only), and the pose moved by the increment."""
+        next BEV pair differs by the gyro only), the pose moved by the increment, and with
+        keyframes the keyframe: this frame where the bands engaged (or at frame 0), else the
+        old one with this frame's turn and pitch corrections added."""
         attitude = observation.attitude if attitude is None else attitude
         reproject = self.bands is not None if reproject is None else reproject
         bev = observation.bev

@@ -52,7 +52,10 @@ def street_model(
     turn fused with DPC's (:class:`jbevo.models.yaw_fusion.YawFusion`), DPC's rotation searched
     within :data:`STREET_GYRO_WINDOW` of the gyro's, and with ``bands`` the robust band update,
     engaged from ``bands_min_travel`` metres per frame, measuring the road's tilt
-    (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity."""
+    (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity; with
+    ``bands_keyframes`` the bands hold keyframes below that travel
+    (:attr:`jbevo.vision.bands.BandGeometry.keyframes`; off: worse on the real KITTI 07 run,
+    ``benchmarks/real_kitti.py``)."""
     model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True, road_tilt=bands)
     geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel, keyframes=bands_keyframes) if bands else None
     return dataclasses.replace(model, bands=geometry)
