@@ -6,8 +6,10 @@ float64. jbevo's covariance and square-root filters, and its filter plus unscent
 against dynamax's unscented Kalman smoother; cuthbert has no unscented filter of its own, so its
 peer is one composed of cuthbertlib's parts (unscented statistical linear regression,
 ``quadrature.linearize.functional``, feeding its square-root Kalman predict / update and RTS
-steps in a ``lax.scan``); and the square-root filter with its ``tria``
-(unrolled modified Gram-Schmidt) against the same filter with LAPACK's QR in its place. The methods are timed in interleaved rounds (best of ``--repeats``), the whole
+steps in a ``lax.scan``); the square-root filter with its ``tria``
+(unrolled modified Gram-Schmidt) against the same filter with LAPACK's QR in its place; and
+jbevo's loops in blocks (``block="auto"``) against one ``lax.scan``: the filters, the smoother,
+vmapped, and the gradient of the log-likelihood (with compile times). The methods are timed in interleaved rounds (best of ``--repeats``), the whole
 measurement repeated ``--runs`` times (the JSON keeps every run; its top-level figures are the
 medians over the runs). Writes ``benchmarks/results/ukf.json`` and prints a table.
 
@@ -21,6 +23,7 @@ import os
 import platform
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import jax
@@ -47,9 +50,10 @@ P0 = np.diag([1.0, 1.0, 0.1]) ** 2
 # --------------------------------------------------------------------------------- jbevo
 
 
-def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False):
+def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1):
     """jbevo's filter (``form``: :mod:`ukf` or :mod:`sqrt_ukf`), optionally followed by the RTS
-    smoother: ``run(x0, increments, fixes) -> (means, covariances or factors)``."""
+    smoother, its loops in blocks of ``block`` steps (1: one ``lax.scan``, ``"auto"``):
+    ``run(x0, increments, fixes) -> (means, covariances or factors)``."""
     model = planar_pose_model()
     scheme = MerweScaled(ALPHA, BETA, KAPPA)
 
@@ -63,13 +67,35 @@ def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False):
             jnp.asarray(R),
             scheme=scheme,
             check_inputs=check_inputs,
+            block=block,
         )
         if smoothed:
-            sm = smoother.smooth(model, res, increments, jnp.asarray(Q), scheme=scheme)
+            sm = smoother.smooth(model, res, increments, jnp.asarray(Q), scheme=scheme, block=block)
             return sm.smoothed_mean, sm.smoothed_cov
         return res[0], res[1]
 
     return run
+
+
+def make_grad(block):
+    """The gradient of the covariance filter's log-likelihood with respect to the initial mean
+    (the cost of learning through the filter), its loop in blocks of ``block`` steps."""
+    model = planar_pose_model()
+    scheme = MerweScaled(ALPHA, BETA, KAPPA)
+
+    def log_likelihood(x0, increments, fixes):
+        prior = ukf.GaussianState(x0, jnp.asarray(P0))
+        res = ukf.filter(model, prior, increments, fixes, jnp.asarray(Q), jnp.asarray(R), scheme=scheme, block=block)
+        return res.log_likelihood
+
+    return jax.jit(jax.grad(log_likelihood))
+
+
+def compile_seconds(fn, *args) -> float:
+    """Seconds to lower and compile the jitted ``fn`` for ``args`` (not cached: a fresh compile)."""
+    t0 = time.perf_counter()
+    fn.lower(*args).compile()
+    return time.perf_counter() - t0
 
 
 def tria_lapack(a):
@@ -221,6 +247,24 @@ def main(argv=None) -> dict:
     smooth_single = jax.jit(make_jbevo(check_inputs=False, smoothed=True))
     smooth_batch = jax.jit(jax.vmap(make_jbevo(check_inputs=False, smoothed=True)))
     sqrt_lapack = with_lapack_tria(jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf)), x0[0], one.increments, one.fixes)
+    # The loops in blocks whose buffers stay small (``block="auto"``), and gradients of the
+    # log-likelihood with respect to the initial mean, with and without blocks.
+    blocked = {
+        "jbevo_single_blocked": jax.jit(make_jbevo(check_inputs=False, block="auto")),
+        "jbevo_sqrt_single_blocked": jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf, block="auto")),
+        "jbevo_smoother_single_blocked": jax.jit(make_jbevo(check_inputs=False, smoothed=True, block="auto")),
+    }
+    jb_batch_blocked = jax.jit(jax.vmap(make_jbevo(check_inputs=False, block="auto")))
+    grads = {f"jbevo_grad_single{suffix}": make_grad(block) for suffix, block in (("", 1), ("_blocked", "auto"))}
+    results_compile = {
+        f"compile_s_{name}": compile_seconds(fn, x0[0], one.increments, one.fixes)
+        for name, fn in (
+            ("filter", jb_single),
+            ("filter_blocked", blocked["jbevo_single_blocked"]),
+            ("grad", grads["jbevo_grad_single"]),
+            ("grad_blocked", grads["jbevo_grad_single_blocked"]),
+        )
+    }
 
     # dynamax updates first, then predicts step t + 1 with inputs[t + 1]: start it from jbevo's
     # first prediction, so that its filtered means are jbevo's.
@@ -257,6 +301,7 @@ def main(argv=None) -> dict:
             "jbevo_sqrt_single_lapack_qr": lambda: sqrt_lapack(x0[0], one.increments, one.fixes),
             "cuthbertlib_single": lambda: cb_single(x0[0], one.increments, fixes_unwrapped[0]),
             "cuthbertlib_uks_single": lambda: cb_uks_single(x0[0], one.increments, fixes_unwrapped[0]),
+            **{name: partial(fn, x0[0], one.increments, one.fixes) for name, fn in (blocked | grads).items()},
         },
         "batched": {
             "jbevo_vmap64": lambda: jb_batch(x0, seqs.increments, seqs.fixes),
@@ -267,6 +312,7 @@ def main(argv=None) -> dict:
             "dynamax_uks_vmap64": lambda: uks_batch(pred0.mean, pred0.cov, dyn_inputs, fixes_unwrapped),
             "cuthbertlib_vmap64": lambda: cb_batch(x0, seqs.increments, fixes_unwrapped),
             "cuthbertlib_uks_vmap64": lambda: cb_uks_batch(x0, seqs.increments, fixes_unwrapped),
+            "jbevo_vmap64_blocked": lambda: jb_batch_blocked(x0, seqs.increments, seqs.fixes),
         },
     }
     # Independent runs of the whole measurement: this shared VM's speed varies between them.
@@ -283,8 +329,13 @@ def main(argv=None) -> dict:
             run[f"sqrt_speedup_{kind}_vs_cuthbertlib"] = run[f"jbevo_sqrt_{kind}"] / run[f"cuthbertlib_{kind}"]
             run[f"smoother_speedup_{kind}_vs_cuthbertlib"] = run[f"jbevo_smoother_{kind}"] / run[f"cuthbertlib_uks_{kind}"]
         run["tria_speedup_vs_lapack_qr"] = run["jbevo_sqrt_single"] / run["jbevo_sqrt_single_lapack_qr"]
+        run["speedup_single_vs_dynamax_blocked"] = run["jbevo_single_blocked"] / run["dynamax_single"]
+        run["smoother_speedup_single_vs_dynamax_blocked"] = run["jbevo_smoother_single_blocked"] / run["dynamax_uks_single"]
+        for kind in ("single", "sqrt_single", "smoother_single", "vmap64", "grad_single"):
+            run[f"blocked_speedup_{kind}"] = run[f"jbevo_{kind}_blocked"] / run[f"jbevo_{kind}"]
         runs.append(run)
     results["runs"] = runs
+    results |= results_compile
     results.update({name: float(np.median([r[name] for r in runs])) for name in runs[0]})
 
     fp_steps = args.filterpy_steps or steps
@@ -318,6 +369,13 @@ def main(argv=None) -> dict:
             max(np.abs(diff).max(), np.abs(np.asarray(peer_chol @ peer_chol.mT - ours[1])).max())
         )
 
+    results["max_abs_diff_blocked_vs_plain"] = float(
+        max(
+            np.abs(np.asarray(a) - np.asarray(b)).max()
+            for name, plain in (("jbevo_single_blocked", jb_single), ("jbevo_smoother_single_blocked", smooth_single))
+            for a, b in zip(blocked[name](x0[0], one.increments, one.fixes), plain(x0[0], one.increments, one.fixes), strict=True)
+        )
+    )
     results["speedup_single_vs_filterpy"] = results["jbevo_single"] / results["filterpy_single"]
     results["machine"] = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}"
     print_table(results)
@@ -358,6 +416,17 @@ def make_dynamax_runner(trig=lambda a: (jnp.sin(a), jnp.cos(a)), smoothed: bool 
 
 def print_table(r: dict) -> None:
     print(f"UKF, localization model, T = {r['T']}, {r['dtype']}, {r['machine']}")
+    print(
+        'block="auto" against one lax.scan: '
+        + ", ".join(
+            f"{kind} {r[f'blocked_speedup_{kind}']:.2f}x"
+            for kind in ("single", "sqrt_single", "smoother_single", "vmap64", "grad_single")
+        )
+        + f"; blocked filter {r['speedup_single_vs_dynamax_blocked']:.2f}x dynamax, blocked filter + smoother "
+        f"{r['smoother_speedup_single_vs_dynamax_blocked']:.2f}x dynamax UKS; max |blocked - plain| "
+        f"{r['max_abs_diff_blocked_vs_plain']:.1e}; compile (s) "
+        + ", ".join(f"{k[10:]} {v:.2f}" for k, v in r.items() if k.startswith("compile_s_"))
+    )
     print(f"{'method':<10} {'single (steps/s)':>18} {'vmap x' + str(r['batch']) + ' (steps/s)':>22}")
     print(f"{'jbevo':<10} {r['jbevo_single']:>18,.0f} {r['jbevo_vmap64']:>22,.0f}")
     print(f"{'dynamax':<10} {r['dynamax_single']:>18,.0f} {r['dynamax_vmap64']:>22,.0f}")

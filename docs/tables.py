@@ -123,6 +123,41 @@ def ukf_forms() -> str:
     return table([f"method ({len(runs)} runs)", "steps/s, median (range)", "speed relative to"], rows)
 
 
+def ukf_blocked() -> str:
+    d = record("benchmarks/results/ukf.json")
+    runs = d["runs"]
+    rows = []
+    for kind, label in [
+        ("single", "UKF, one sequence"),
+        ("sqrt_single", "square-root UKF, one sequence"),
+        ("smoother_single", "UKF + RTS smoother, one sequence"),
+        ("vmap64", f"UKF, vmap over {d['batch']}"),
+        ("grad_single", "gradient of the UKF's log-likelihood, one sequence"),
+    ]:
+        plain, blocked = (np.median([r[f"jbevo_{kind}{suffix}"] for r in runs]) for suffix in ("", "_blocked"))
+        ratio = [r[f"blocked_speedup_{kind}"] for r in runs]
+        rows.append([label, f"{plain:,.0f}", f"{blocked:,.0f}", f"{np.median(ratio):.2f} ({min(ratio):.2f} - {max(ratio):.2f})"])
+    for key, label in [
+        ("speedup_single_vs_dynamax_blocked", "blocked UKF, one sequence, against dynamax's UKF"),
+        ("smoother_speedup_single_vs_dynamax_blocked", "blocked UKF + RTS smoother, one sequence, against dynamax's UKS"),
+    ]:
+        ratio = [r[key] for r in runs]
+        rows.append([label, "", "", f"{np.median(ratio):.2f} ({min(ratio):.2f} - {max(ratio):.2f})"])
+    return table(
+        [f"method ({len(runs)} runs)", "one lax.scan (steps/s)", 'block="auto" (steps/s)', "speed-up, median (range)"], rows
+    )
+
+
+def ukf_compile() -> str:
+    d = record("benchmarks/results/ukf.json")
+    s = {k: d[f"compile_s_{k}"] for k in ("filter", "filter_blocked", "grad", "grad_blocked")}
+    return (
+        f"filter {s['filter']:.2f} s plain, {s['filter_blocked']:.2f} s blocked; gradient {s['grad']:.2f} s plain, "
+        f"{s['grad_blocked']:.2f} s blocked (one compile each, max |blocked - plain| over the filter's and the "
+        f"smoother's outputs {d['max_abs_diff_blocked_vs_plain']:.0e})"
+    )
+
+
 def parallel_in_time() -> str:
     d = record("benchmarks/results/parallel_in_time.json")
     rows = []
@@ -996,6 +1031,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
     "ukf_forms": ukf_forms,
+    "ukf_blocked": ukf_blocked,
     "parallel_in_time": parallel_in_time,
     "attitude_synthetic": attitude_synthetic,
     "attitude_real": attitude_real,
@@ -1044,6 +1080,7 @@ TABLES: dict[str, Callable[[], str]] = {
 VALUES: dict[str, Callable[[], str]] = {
     "attitude_world_tilt": attitude_world_tilt,
     "ukf_agreement": ukf_agreement,
+    "ukf_compile": ukf_compile,
     "localization_smoothing_summary": localization_smoothing_summary,
     "parallel_in_time_summary": parallel_in_time_summary,
     "ukf_cuthbertlib_agreement": ukf_cuthbertlib_agreement,

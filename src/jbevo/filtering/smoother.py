@@ -28,13 +28,14 @@ angles use the model's ``state_residual``, ``state_add`` and ``state_mean``.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from jbevo.filtering import linalg
+from jbevo.filtering.blocked_scan import blocked_scan
 from jbevo.filtering.ukf import FilterResult, Scheme, StateSpaceModel
 from jbevo.filtering.unscented import MerweScaled, offset_points, residuals, sigma_offsets, weighted_mean, weighted_outer
 
@@ -54,6 +55,7 @@ def smooth(
     motion_cov: Float[Array, "n n"] | Float[Array, "T n n"],
     *,
     scheme: Scheme = MerweScaled(),
+    block: int | Literal["auto"] = 1,
 ) -> SmootherResult:
     """The unscented RTS smoother (module docstring) over ``result``, the output of
     :func:`jbevo.filtering.ukf.filter` run with the same ``model``, ``controls``, ``motion_cov``
@@ -66,9 +68,10 @@ def smooth(
     shapes and ``scheme`` and the model's motion are not used (the filter's own were); to smooth
     with others, pass ``result._replace(smoother_gains=None)``, which recomputes everything with
     them. The filter's gain into step ``k + 1`` is the smoother's gain from step ``k``:
-    ``gains[k] == result.smoother_gains[k + 1]``."""
+    ``gains[k] == result.smoother_gains[k + 1]``. ``block`` as in
+    :func:`jbevo.filtering.ukf.filter` (the backward loop in blocks; the same results)."""
     if result.smoother_gains is None:
-        return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme)
+        return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme, block=block)
     means, covs = result.filtered_mean, result.filtered_cov
     steps, _ = _checked_inputs(means, covs, controls, motion_cov)
     fields = {"predicted_mean": means.shape, "predicted_cov": covs.shape, "smoother_gains": covs.shape}
@@ -88,7 +91,7 @@ def smooth(
         return _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted_cov, gain)
 
     inputs = (means[:-1], covs[:-1], result.predicted_mean[1:], result.predicted_cov[1:], result.smoother_gains[1:])
-    _, (sm, sc, gains) = jax.lax.scan(back, (means[-1], covs[-1]), inputs, reverse=True)
+    _, (sm, sc, gains) = blocked_scan(back, (means[-1], covs[-1]), inputs, reverse=True, block=block)
     return _with_last(sm, sc, gains, means, covs)
 
 
@@ -135,6 +138,7 @@ def smooth_beliefs(
     motion_cov: Float[Array, "n n"] | Float[Array, "T n n"],
     *,
     scheme: Scheme = MerweScaled(),
+    block: int | Literal["auto"] = 1,
 ) -> SmootherResult:
     """:func:`smooth` over filtered beliefs given as arrays (``means[t]``, ``covs[t]``: the belief
     after step ``t``'s motion with ``controls[t]`` and its updates), for filters that are not one
@@ -157,8 +161,8 @@ def smooth_beliefs(
         return _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted_cov, gain)
 
     later_controls = jax.tree.map(lambda a: a[1:], controls)
-    _, (sm, sc, gains) = jax.lax.scan(
-        back, (means[-1], covs[-1]), (means[:-1], covs[:-1], later_controls, q_seq[1:]), reverse=True
+    _, (sm, sc, gains) = blocked_scan(
+        back, (means[-1], covs[-1]), (means[:-1], covs[:-1], later_controls, q_seq[1:]), reverse=True, block=block
     )
     return _with_last(sm, sc, gains, means, covs)
 

@@ -25,7 +25,7 @@ stay positive definite (as the covariance form does).
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -33,6 +33,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from jbevo.filtering import linalg
+from jbevo.filtering.blocked_scan import blocked_scan
 from jbevo.filtering.ukf import (
     _LOG_2PI,
     GaussianState,
@@ -212,10 +213,12 @@ def filter(
     check_inputs: bool = True,
     unroll: int = 1,
     measurement_inputs: Any = None,
+    block: int | Literal["auto"] = 1,
 ) -> SqrtFilterResult:
     """Run the square-root UKF over a sequence with ``jax.lax.scan``: the arguments and their
     checks as :func:`jbevo.filtering.ukf.filter` (Q and R as covariances, factored once, or per
-    step if they have a time axis); ``initial`` as a factor or as a covariance."""
+    step if they have a time axis; ``block`` as there); ``initial`` as a factor or as a
+    covariance."""
     if isinstance(initial, SqrtGaussianState):
         initial = initial.to_gaussian()
     initial, controls, measurements, motion_cov, measurement_cov, mask = _sequence_inputs(
@@ -232,8 +235,8 @@ def filter(
         filtered, ll = update(model, predicted, z, _noise_at(r_const, r_t), scheme, z_mask, z_input)
         return filtered, (filtered, predicted, ll)
 
-    _, (filtered, predicted, lls) = jax.lax.scan(
-        body, start, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), unroll=unroll
+    _, (filtered, predicted, lls) = blocked_scan(
+        body, start, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), block=block, unroll=unroll
     )
     return SqrtFilterResult(filtered.mean, filtered.chol, predicted.mean, predicted.chol, lls, jnp.sum(lls))
 

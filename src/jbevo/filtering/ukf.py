@@ -27,7 +27,7 @@ log-likelihood. NaNs never enter the arithmetic (double-where), so gradients sta
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -35,6 +35,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from jbevo.filtering import linalg
+from jbevo.filtering.blocked_scan import blocked_scan
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
 from jbevo.filtering.unscented import (
     AddFn,
@@ -229,6 +230,7 @@ def filter(
     check_inputs: bool = True,
     unroll: int = 1,
     measurement_inputs: Any = None,
+    block: int | Literal["auto"] = 1,
 ) -> FilterResult:
     """Run the UKF over a sequence with ``jax.lax.scan``.
 
@@ -240,7 +242,11 @@ def filter(
     under ``jit``) on non-finite controls or initial state, and on Q, R or the initial
     covariance that are not finite symmetric positive definite. ``unroll`` is passed to
     ``lax.scan``. ``measurement_inputs`` (a pytree with leading axis ``T``, or ``None``) is
-    passed to the model as ``measurement(x, measurement_inputs[t])``.
+    passed to the model as ``measurement(x, measurement_inputs[t])``. ``block`` runs the loop in
+    blocks of that many steps (:func:`jbevo.filtering.blocked_scan.blocked_scan`; the same
+    results): ``"auto"`` makes a forward run of one sequence of a small model faster on the CPU
+    (docs/filtering.md); keep 1 (one ``lax.scan``) under ``vmap`` or differentiation, where it
+    is slower.
     """
     initial, controls, measurements, motion_cov, measurement_cov, mask = _sequence_inputs(
         model, initial, controls, measurements, motion_cov, measurement_cov, mask, check_inputs, measurement_inputs
@@ -252,8 +258,8 @@ def filter(
     def body(state, inputs):
         return _step(model, scheme, q_const, r_const, state, inputs)
 
-    _, (filtered, predicted, lls, gains) = jax.lax.scan(
-        body, initial, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), unroll=unroll
+    _, (filtered, predicted, lls, gains) = blocked_scan(
+        body, initial, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), block=block, unroll=unroll
     )
     return FilterResult(filtered.mean, filtered.cov, predicted.mean, predicted.cov, lls, jnp.sum(lls), gains)
 

@@ -1,0 +1,120 @@
+"""``lax.scan`` in blocks whose buffers stay small, for the filters' few-number steps on XLA:CPU.
+
+XLA:CPU runs the body of a loop as a sequence of kernels ("thunks"). It runs them one after the
+other only when every buffer they touch is at most 512 bytes (or there are at most 8 of them);
+otherwise it schedules them as a dependency graph, which costs an allocation and queue work on
+every iteration. A plain ``lax.scan`` body always touches the whole stacked inputs and outputs
+(``(T, ...)`` arrays), so a filter step of a 3-state model, a few dozen small kernels, is run as
+a graph on every step.
+
+:func:`blocked_scan` runs the same recursion as two nested scans: the outer one over blocks of
+``K`` steps, the inner one over the steps of a block, whose stacked inputs and outputs are
+``(K, ...)`` arrays. ``K`` is chosen so that every per-block slice fits in 512 bytes, so the inner body,
+where the work is, runs in order. Each step computes what ``lax.scan``'s step computes, on the
+same values in the same order: the per-step results are bit for bit the same (a sum over all
+steps taken afterwards may round differently). ``benchmarks/ukf.py`` times it on the 3-state
+localization UKF (docs/filtering.md has the table): the forward filter and the filter + RTS
+smoother of one sequence run faster; the square-root filter does not gain (its update stacks a
+6 x 13 matrix, over the threshold); under ``vmap`` the batch makes every buffer large anyway and
+the blocks only add work, and so do gradients, whose stored residuals are large (and which take
+longer to compile). The filters therefore take ``block=1`` (one ``lax.scan``) by default and
+``"auto"`` on request.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from math import prod
+from typing import Any, Literal, TypeVar
+
+import jax
+import jax.numpy as jnp
+
+Carry = TypeVar("Carry")
+
+#: XLA:CPU runs a loop body's kernels in order when every buffer they use is at most this many
+#: bytes (``ThunkExecutor::Options::execute_sequential_buffer_threshold``, not configurable).
+SEQUENTIAL_BUFFER_BYTES = 512
+
+
+def _step_bytes(leaf: Any) -> int:
+    """Bytes of one step's slice of a stacked leaf (shape ``(T, ...)``)."""
+    return prod(leaf.shape[1:]) * jnp.dtype(leaf.dtype).itemsize
+
+
+def _bytes(leaf: Any) -> int:
+    return prod(jnp.shape(leaf)) * jnp.dtype(leaf.dtype).itemsize
+
+
+def block_size(f: Callable, init: Any, xs: Any, length: int) -> int:
+    """The block length ``block="auto"`` gives :func:`blocked_scan` for ``f`` over ``xs``.
+
+    ``K_max`` is the most steps whose stacked inputs and outputs fit in
+    :data:`SEQUENTIAL_BUFFER_BYTES` per leaf. The block is the largest divisor of ``length`` up to
+    ``K_max`` (no left-over steps, so the step is compiled once); if that is 1, ``K_max`` itself
+    (the left-over steps run as a second, separately compiled scan). 1 (a plain scan) where
+    ``K_max < 2``, a carry leaf alone exceeds the threshold, or the backend is not the CPU.
+    """
+    if jax.default_backend() != "cpu" or length < 2:
+        return 1
+    x0 = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), xs)
+    _, y0 = jax.eval_shape(f, init, x0)
+    if max((_bytes(leaf) for leaf in jax.tree.leaves(init)), default=0) > SEQUENTIAL_BUFFER_BYTES:
+        return 1
+    widest = max([_step_bytes(leaf) for leaf in jax.tree.leaves(xs)] + [_bytes(leaf) for leaf in jax.tree.leaves(y0)])
+    most = min(SEQUENTIAL_BUFFER_BYTES // max(widest, 1), length)
+    if most < 2:
+        return 1
+    divisor = max(k for k in range(1, most + 1) if length % k == 0)
+    return divisor if divisor >= 2 else most
+
+
+def blocked_scan(
+    f: Callable[[Carry, Any], tuple[Carry, Any]],
+    init: Carry,
+    xs: Any,
+    *,
+    block: int | Literal["auto"] = "auto",
+    reverse: bool = False,
+    unroll: int = 1,
+) -> tuple[Carry, Any]:
+    """``jax.lax.scan(f, init, xs, reverse=reverse, unroll=unroll)``, run as blocks of ``block``
+    steps (``"auto"``: :func:`block_size`; 1 is a plain scan). Steps that do not fill a last
+    block run as a plain scan after the blocks (before them in reverse). ``unroll`` applies to
+    the scans over steps. ``xs`` must have at least one leaf (the filters always scan over
+    inputs)."""
+    leaves = jax.tree.leaves(xs)
+    if not leaves:
+        raise ValueError("blocked_scan needs inputs xs with a leading axis")
+    length = leaves[0].shape[0]
+    if block == "auto":
+        block = block_size(f, init, xs, length)
+    if not isinstance(block, int) or isinstance(block, bool) or block < 1:
+        raise ValueError(f'block must be a positive int or "auto", got {block!r}')
+    block = min(block, max(length, 1))
+    if block == 1:
+        return jax.lax.scan(f, init, xs, reverse=reverse, unroll=unroll)
+    blocks = length // block
+    cut = blocks * block
+    head = jax.tree.map(lambda a: a[:cut].reshape(blocks, block, *a.shape[1:]), xs)
+    tail = jax.tree.map(lambda a: a[cut:], xs)
+
+    def run_block(carry, block_xs):
+        return jax.lax.scan(f, carry, block_xs, reverse=reverse, unroll=unroll)
+
+    def run_head(carry):
+        carry, ys = jax.lax.scan(run_block, carry, head, reverse=reverse)
+        return carry, jax.tree.map(lambda a: a.reshape(cut, *a.shape[2:]), ys)
+
+    if cut == length:
+        return run_head(init)
+    if reverse:
+        carry, tail_ys = jax.lax.scan(f, init, tail, reverse=True, unroll=unroll)
+        carry, head_ys = run_head(carry)
+    else:
+        carry, head_ys = run_head(init)
+        carry, tail_ys = jax.lax.scan(f, carry, tail, unroll=unroll)
+    return carry, jax.tree.map(lambda a, b: jnp.concatenate([a, b]), head_ys, tail_ys)
+
+
+__all__ = ["SEQUENTIAL_BUFFER_BYTES", "block_size", "blocked_scan"]
