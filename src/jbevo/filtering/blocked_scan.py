@@ -13,9 +13,8 @@ a graph on every step.
 where the work is, runs in order. Each step computes what ``lax.scan``'s step computes, on the
 same values in the same order: the per-step results are bit for bit the same (a sum over all
 steps taken afterwards may round differently). ``benchmarks/ukf.py`` times it on the 3-state
-localization UKF (docs/filtering.md has the table): the forward filter and the filter + RTS
-smoother of one sequence run faster; the square-root filter does not gain (its update stacks a
-6 x 13 matrix, over the threshold); under ``vmap`` the batch makes every buffer large anyway and
+localization UKF (docs/filtering.md has the table): the forward filters and the filter + RTS
+smoother of one sequence run faster; under ``vmap`` the batch makes every buffer large anyway and
 the blocks only add work, and so do gradients, whose stored residuals are large (and which take
 longer to compile). The filters therefore take ``block=1`` (one ``lax.scan``) by default and
 ``"auto"`` on request.

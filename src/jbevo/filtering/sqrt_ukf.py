@@ -14,9 +14,13 @@ conditioning that matters is that of the factor (the square root of the covarian
   ``[[L_S, 0], [P_xz L_S^-T, L^+]]``: the innovation's factor, the whitened gain ``W^T`` and the
   posterior's factor, with ``L^+ L^+T = P - W^T W`` computed as a sum of squares, never a
   difference; the mean moves by ``W^T L_S^-1 y`` (one triangular solve).
-* Missing entries (NaN, or ``mask`` False): their rows of the stacked square roots of ``S`` are
-  zeroed and an identity block added, which is the covariance form's replacement of their rows
-  and columns of ``S`` by the identity; their columns of the gain are then zero.
+* Missing entries (NaN, or ``mask`` False): their rows of the sigma points' square roots of ``S``
+  are zeroed and the noise's factor is that of R with their rows and columns replaced by the
+  identity (``chol(R)`` itself when nothing is missing), which is the covariance form's
+  replacement of their rows and columns of ``S`` by the identity; their columns of the gain are
+  then zero. Only with missing entries is R formed from its factor (``chol(R) chol(R)^T``) and
+  factored again, once per step: an ``m x m`` noise block keeps the update's stack at ``m + n``
+  rows by ``2n + 1 + m`` columns.
 
 The weights of the default :class:`~jbevo.filtering.unscented.MerweScaled` scheme have
 ``Wc_0 = 2 > 0``; schemes with a negative ``Wc_0`` use the downdate, which needs the result to
@@ -182,14 +186,18 @@ def update(
     innovation = z_safe - z_pred if model.measurement_residual is None else model.measurement_residual(z_safe, z_pred)
     innovation = jnp.where(observed, innovation, 0.0)
     m, n = measurement.shape[-1], mean.shape[-1]
-    # One factorisation of the joint second moments of (z, x): tria of the stacked points
-    # [[dz, chol(R) | missing-entry identity], [dx, 0]] is [[L_S, 0], [Pxz L_S^-T, L_post]].
+    # The noise's factor with the missing entries' rows and columns of R replaced by the identity,
+    # as one m x m factor: chol(R) itself when all are observed, else the factor of that matrix
+    # (an m x m block keeps the joint stack below at m + n rows by 2n + 1 + m columns).
     dz_seen = jnp.where(observed[None, :], dz, 0.0)
-    noise = jnp.concatenate(
-        [jnp.where(observed[:, None], measurement_chol, 0.0), jnp.diag(jnp.where(observed, 0.0, 1.0).astype(mean.dtype))], axis=1
-    )
+    both = observed[:, None] & observed[None, :]
+    r = jnp.sum(measurement_chol[:, None, :] * measurement_chol[None, :, :], axis=-1)
+    partial = linalg.cholesky(jnp.where(both, r, jnp.eye(m, dtype=mean.dtype)))
+    noise = jnp.where(jnp.all(observed), measurement_chol, partial)
+    # One factorisation of the joint second moments of (z, x): tria of the stacked points
+    # [[dz, noise], [dx, 0]] is [[L_S, 0], [Pxz L_S^-T, L_post]].
     joint = _factor(
-        scheme, w.cov, jnp.concatenate([dz_seen, dx], axis=1), jnp.concatenate([noise, jnp.zeros((n, 2 * m), mean.dtype)])
+        scheme, w.cov, jnp.concatenate([dz_seen, dx], axis=1), jnp.concatenate([noise, jnp.zeros((n, m), mean.dtype)])
     )
     s_chol, whitened_gain_t, new_chol = joint[:m, :m], joint[m:, :m], joint[m:, m:]
     e = linalg.solve_lower(s_chol, innovation[:, None])[:, 0]
