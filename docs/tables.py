@@ -920,6 +920,51 @@ def real_kitti_imu_dropouts() -> str:
     return table(header, rows)
 
 
+FORWARD_FUSION = "benchmarks/results/forward_fusion.json"
+FORWARD_COLUMNS = [
+    ("distance_ratio", "distance ratio", 3),
+    ("final_pct", "final error (%)", 2),
+    ("motion_cm", "motion RMSE (cm)", 1),
+    ("along_cm", "along the heading (cm)", 1),
+    ("across_cm", "across (cm)", 1),
+    ("pitch_roll_max_deg", "pitch/roll max error (deg)", 2),
+]
+
+
+def forward_fusion() -> str:
+    runs = record(FORWARD_FUSION)["runs"]
+    rows = []
+    for segment, values in runs.items():
+        for name, m in values.items():
+            if "(sweep)" not in name:
+                rows.append([f"{segment}: {name}"] + [num(m[key], digits) for key, _, digits in FORWARD_COLUMNS])
+    return table(["run: model"] + [c[1] for c in FORWARD_COLUMNS], rows)
+
+
+def forward_fusion_sweep() -> str:
+    d = record(FORWARD_FUSION)
+    rows = []
+    for accel_std in d["settings"]["sweep"]:
+        name = f"forward fusion, accel_std {accel_std} (sweep)"
+        cells = []
+        for run in ("06", "07"):
+            m = d["runs"][run][name]
+            cells += [num(m["final_pct"], 2), num(m["motion_cm"], 1)]
+        rows.append([f"{accel_std:g}"] + cells)
+    header = ["accel_std (m/s^2 per sample)", "06: final (%)", "06: motion (cm)", "07: final (%)", "07: motion (cm)"]
+    return table(header, rows)
+
+
+def forward_fusion_street_world() -> str:
+    worlds = record(FORWARD_FUSION)["street_world"]
+    rows = [
+        [f"{run}: {name}"] + [num(m[key], digits) for key, _, digits in FORWARD_COLUMNS]
+        for run, values in worlds.items()
+        for name, m in values.items()
+    ]
+    return table(["street world's copy: model"] + [c[1] for c in FORWARD_COLUMNS], rows)
+
+
 def real_kitti_keyframes_speed() -> str:
     speed = record(REAL_KITTI)["frames_per_s"]
     ratios = [v["street + robust bands, keyframes"] / v["street + robust bands"] for v in speed.values()]
@@ -1032,6 +1077,9 @@ TABLES: dict[str, Callable[[], str]] = {
     "ukf_speed": ukf_speed,
     "ukf_forms": ukf_forms,
     "ukf_blocked": ukf_blocked,
+    "forward_fusion": forward_fusion,
+    "forward_fusion_sweep": forward_fusion_sweep,
+    "forward_fusion_street_world": forward_fusion_street_world,
     "parallel_in_time": parallel_in_time,
     "attitude_synthetic": attitude_synthetic,
     "attitude_real": attitude_real,

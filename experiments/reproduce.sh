@@ -18,6 +18,7 @@ python benchmarks/attitude.py
 python benchmarks/attitude_real.py
 python benchmarks/real_kitti.py
 python benchmarks/street_world.py
+python benchmarks/forward_fusion.py
 python experiments/filtering_demo.py
 python experiments/reference_metrics.py
 python experiments/bands.py

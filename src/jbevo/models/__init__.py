@@ -11,6 +11,7 @@ Example::
 from jbevo.models.baselines import map_matching_alone
 from jbevo.models.bevo import Bevo, BevoOutput
 from jbevo.models.bevo_plus import BevoPlus, LocalizationOutput
+from jbevo.models.forward_fusion import ForwardFusion
 from jbevo.models.losses import localization_loss, motion_loss, planar_huber, relative_motion
 from jbevo.models.parameters import num_learnable
 from jbevo.models.presets import localization_model, street_model
@@ -22,6 +23,7 @@ __all__ = [
     "Bevo",
     "BevoOutput",
     "BevoPlus",
+    "ForwardFusion",
     "LocalizationOutput",
     "RoadTilt",
     "YawFusion",

@@ -67,6 +67,7 @@ from jbevo.geometry.camera import Camera
 from jbevo.geometry.se2 import se2_compose
 from jbevo.inertial.kinematics import GRAVITY, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements, valid_mean
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
+from jbevo.models.forward_fusion import COLD_SPEED_STD, WARM_SPEED_STD, ForwardFusion
 from jbevo.models.parameters import num_learnable
 from jbevo.models.road_tilt import RoadTilt
 from jbevo.models.yaw_fusion import YawFusion
@@ -109,6 +110,7 @@ class BevoCarry(NamedTuple):
     pose: Float[Array, " 3"]  #: the planar pose (x, y, yaw)
     road_tilt: GaussianState  #: the road's tilt along the heading (level and unused without ``road_tilt``)
     keyframe: Keyframe  #: the bands' keyframe (unused without keyframes)
+    forward: GaussianState  #: the forward speed and travel (unused without ``forward``)
 
 
 class Observation(NamedTuple):
@@ -122,6 +124,7 @@ class Observation(NamedTuple):
     confidence: Float[Array, ""]  #: DPC's confidence (0 at frame 0)
     gyro_turn: Float[Array, ""]  #: the gyro's yaw increment over the frame (radians)
     keyframe: Bool[Array, ""]  #: this frame becomes the bands' keyframe (with keyframes)
+    forward: GaussianState  #: the forward speed and travel after the frame's update (with ``forward``)
 
 
 class BevoOutput(NamedTuple):
@@ -160,6 +163,9 @@ class Bevo(eqx.Module):
         road_tilt: :class:`jbevo.models.road_tilt.RoadTilt`, or None (off): with bands and the
             filter's attitude, the bands' slope updates the road's tilt (added to the pitch the
             BEV is projected with) instead of the filter's pitch against gravity.
+        forward: :class:`jbevo.models.forward_fusion.ForwardFusion`, or None (off): the forward
+            motion per frame from the accelerometer's speed and DPC's increment together (the
+            attitude filter still takes DPC's own).
 
     Example::
 
@@ -180,6 +186,7 @@ class Bevo(eqx.Module):
     road: RoadView | None = None
     yaw_fusion: YawFusion | None = None
     road_tilt: RoadTilt | None = None
+    forward: ForwardFusion | None = None
 
     @classmethod
     def create(
@@ -192,12 +199,14 @@ class Bevo(eqx.Module):
         road: bool = False,
         yaw_fusion: bool = False,
         road_tilt: bool = False,
+        forward_fusion: bool = False,
         **dpc_kwargs,
     ) -> Bevo:
         """Hand-set defaults: :meth:`SpeedAidedAttitude.create`, DPC's defaults with 256
         angles, a 128 x 128 BEV at 0.1 m from 7.5 m ahead, with ``bands``
         :meth:`BandGeometry.create`, with ``road`` :meth:`RoadView.create`, with ``yaw_fusion``
-        :meth:`YawFusion.create` and with ``road_tilt`` :meth:`RoadTilt.create`."""
+        :meth:`YawFusion.create`, with ``road_tilt`` :meth:`RoadTilt.create` and with
+        ``forward_fusion`` :meth:`ForwardFusion.create`."""
         if attitude_source not in ATTITUDE_SOURCES:
             raise ValueError(f"attitude_source must be one of {ATTITUDE_SOURCES}, got {attitude_source!r}")
         grid = BevGrid(0.1, (128, 128), near=7.5) if grid is None else grid
@@ -213,6 +222,7 @@ class Bevo(eqx.Module):
             RoadView.create() if road else None,
             YawFusion.create() if yaw_fusion else None,
             RoadTilt.create() if road_tilt else None,
+            ForwardFusion.create() if forward_fusion else None,
         )
 
     def num_learnable(self) -> int:
@@ -244,7 +254,8 @@ class Bevo(eqx.Module):
         keyframe = Keyframe(
             jnp.zeros(self.grid.shape if self._keyframes else (0, 0), dtype), zero, jnp.zeros((), jnp.int32), zero
         )
-        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype), tilt, keyframe)
+        forward = ForwardFusion.initial(attitude.speed, WARM_SPEED_STD if warm_start else COLD_SPEED_STD, dtype)
+        carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype), tilt, keyframe, forward)
         frames = Frame(seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         return carry, frames, seq
 
@@ -360,10 +371,18 @@ class Bevo(eqx.Module):
         if self.yaw_fusion is not None:
             rotation = self.yaw_fusion.fuse(rotation, gyro_turn.astype(rotation.dtype))
         increment = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
+        forward = carry.forward
+        if self.forward is not None:
+            # The forward speed through the IMU block at the body's pitch against gravity, then
+            # DPC's forward increment; the posterior travel is the frame's forward motion.
+            forward = self.forward.predict(forward, frame.accel, belief.pitch.astype(forward.mean.dtype), self.attitude.dt)
+            forward = self.forward.update(forward, increment[0], moving)
         belief = self.attitude.update_speed(belief, jnp.where(moving, increment[0] / frame_dt, jnp.nan))
         belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
+        if self.forward is not None:
+            increment = increment.at[0].set(jnp.where(moving, ForwardFusion.travel(forward).astype(increment.dtype), 0.0))
         confidence = jnp.where(moving, reg.confidence, 0.0)
-        return Observation(belief, tilt, pitch_roll, bev, increment, confidence, gyro_turn.astype(bev.dtype), keyframe)
+        return Observation(belief, tilt, pitch_roll, bev, increment, confidence, gyro_turn.astype(bev.dtype), keyframe, forward)
 
     def _on_road(self, pitch_roll: Float[Array, " 2"], tilt: GaussianState) -> Float[Array, " 2"]:
         """The body's ``pitch_roll`` with the road's tilt added to the pitch (with ``road_tilt``)."""
@@ -407,7 +426,9 @@ class Bevo(eqx.Module):
                 jnp.where(reset, 0, keyframe.age + 1),
                 jnp.where(reset, 0.0, keyframe.pitch_drift) + correction,
             )
-        new = BevoCarry(attitude, bev, se2_compose(carry.pose, observation.increment), observation.road_tilt, keyframe)
+        new = BevoCarry(
+            attitude, bev, se2_compose(carry.pose, observation.increment), observation.road_tilt, keyframe, observation.forward
+        )
         # The carry keeps its types (float32, or float64 under x64) whatever its parts compute in.
         return jax.tree_util.tree_map(lambda x, y: x.astype(y.dtype), new, carry)
 

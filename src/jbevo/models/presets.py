@@ -46,6 +46,7 @@ def street_model(
     bands: bool = True,
     bands_min_travel: float = STREET_BANDS_MIN_TRAVEL,
     bands_keyframes: bool = False,
+    forward_fusion: bool = False,
 ) -> Bevo:
     """The hand-set BEVO for real streets (KITTI-size frames with a calibrated IMU): the road view
     (:class:`jbevo.vision.road_view.RoadView`: camera against the road, road corridor), the gyro's
@@ -55,8 +56,12 @@ def street_model(
     (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity; with
     ``bands_keyframes`` the bands hold keyframes below that travel
     (:attr:`jbevo.vision.bands.BandGeometry.keyframes`; off: worse on the real KITTI 07 run,
-    ``benchmarks/real_kitti.py``)."""
-    model = Bevo.create(grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True, road_tilt=bands)
+    ``benchmarks/real_kitti.py``); with ``forward_fusion`` the forward motion per frame fuses the
+    accelerometer's speed with DPC's increment (:class:`jbevo.models.forward_fusion.ForwardFusion`;
+    off by default: ``benchmarks/forward_fusion.py``)."""
+    model = Bevo.create(
+        grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True, road_tilt=bands, forward_fusion=forward_fusion
+    )
     geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel, keyframes=bands_keyframes) if bands else None
     return dataclasses.replace(model, bands=geometry)
 

@@ -1,0 +1,82 @@
+"""The forward speed and travel filter: the IMU block integrated exactly (gravity's share at the
+pitch, missing samples, the travel reset per frame), DPC's increment weighted by its relative
+noise and robustly, and its arguments checked."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jbevo.inertial.kinematics import GRAVITY
+from jbevo.models.forward_fusion import COLD_SPEED_STD, WARM_SPEED_STD, ForwardFusion
+
+pytestmark = pytest.mark.usefixtures("float64")
+
+DT = 0.01
+
+
+def block(forward, samples=10):
+    accel = np.zeros((samples, 3))
+    accel[:, 0] = forward
+    accel[:, 2] = GRAVITY
+    return jnp.asarray(accel)
+
+
+def test_a_block_is_integrated_exactly():
+    fusion = ForwardFusion.create(accel_std=0.1)
+    state = fusion.initial(jnp.float64(12.0), WARM_SPEED_STD, jnp.float64)
+    moved = fusion.predict(state, block(np.linspace(-1.0, 2.0, 10)), jnp.float64(0.0), DT)
+    speeds = 12.0 + DT * np.cumsum(np.r_[0.0, np.linspace(-1.0, 2.0, 10)])  # before and after each sample
+    np.testing.assert_allclose(moved.mean, [speeds[-1], DT * np.sum(0.5 * (speeds[1:] + speeds[:-1]))], rtol=1e-12)
+    # The speed's variance grows by the walk per sample; the travel's by the speed's over the block.
+    assert float(moved.cov[0, 0]) == pytest.approx(WARM_SPEED_STD**2 + 10 * (0.1 * DT) ** 2, rel=1e-9)
+    assert float(moved.cov[1, 1]) == pytest.approx((10 * DT * WARM_SPEED_STD) ** 2, rel=0.01)
+
+
+def test_gravity_share_and_missing_samples():
+    fusion = ForwardFusion.create()
+    state = fusion.initial(jnp.float64(5.0), WARM_SPEED_STD, jnp.float64)
+    pitch = np.radians(2.0)  # nose down: a car at constant speed downhill reads f_x = -g sin(pitch)
+    level = fusion.predict(state, block(-GRAVITY * np.sin(pitch)), jnp.float64(pitch), DT)
+    np.testing.assert_allclose(level.mean, [5.0, 0.5], rtol=1e-12)
+    # A missing sample counts as the block's mean (0.5 here): the same as that sample measured.
+    gap = np.array(block(np.r_[np.zeros(5), np.ones(5)]))
+    gap[2] = np.nan
+    filled = np.array(block(np.r_[np.zeros(5), np.ones(5)]))
+    filled[2, 0] = 5.0 / 9.0
+    a = fusion.predict(state, jnp.asarray(gap), jnp.float64(0.0), DT)
+    b = fusion.predict(state, jnp.asarray(filled), jnp.float64(0.0), DT)
+    np.testing.assert_allclose(a.mean, b.mean, rtol=1e-12)
+
+
+def test_the_travel_restarts_every_frame():
+    fusion = ForwardFusion.create()
+    state = fusion.initial(jnp.float64(10.0), WARM_SPEED_STD, jnp.float64)
+    first = fusion.predict(state, block(0.0), jnp.float64(0.0), DT)
+    second = fusion.predict(first, block(0.0), jnp.float64(0.0), DT)
+    np.testing.assert_allclose(second.mean, [10.0, 1.0], rtol=1e-12)
+    assert float(second.cov[0, 1]) > 0  # the travel follows the speed again
+
+
+def test_dpc_pulls_the_travel_by_its_relative_noise_and_robustly():
+    fusion = ForwardFusion.create(accel_std=0.5, displacement_std=0.05)
+    state = fusion.initial(jnp.float64(10.0), 1.0, jnp.float64)
+    predicted = fusion.predict(state, block(0.0), jnp.float64(0.0), DT)  # travel 1 m, 0.1 m uncertain
+    near = fusion.update(predicted, jnp.float64(1.02))
+    far = fusion.update(predicted, jnp.float64(1.5))
+    pull = lambda post, z: float((ForwardFusion.travel(post) - 1.0) / (z - 1.0))
+    # Near: the gain of a 5 cm (5 %) measurement against a 10 cm prediction, plus the robust term.
+    prior, noise = float(predicted.cov[1, 1]), (0.05 * 1.02) ** 2 + 0.02**2
+    assert pull(near, 1.02) == pytest.approx(prior / (prior + noise), rel=1e-6)  # float32 parameters
+    assert pull(far, 1.5) < 0.5 * pull(near, 1.02)  # a gross increment loses its weight
+    # The speed moves with the travel (they are correlated through the block).
+    assert float(near.mean[0]) > 10.0
+    for skipped in (fusion.update(predicted, jnp.float64(np.nan)), fusion.update(predicted, jnp.float64(1.2), use=False)):
+        np.testing.assert_array_equal(skipped.mean, predicted.mean)
+
+
+def test_cold_start_is_vague_and_arguments_are_checked():
+    assert COLD_SPEED_STD > 10 * WARM_SPEED_STD
+    with pytest.raises(ValueError, match="positive"):
+        ForwardFusion.create(accel_std=0.0)
+    with pytest.raises(ValueError, match="positive"):
+        ForwardFusion.create(displacement_std=-0.1)
