@@ -56,8 +56,8 @@ def test_gradient_of_the_walk(float64):
 
 def _tilted_drive(world, step, n, tilt=TILT):
     """A level straight drive at ``step`` metres per frame (noiseless IMU) whose KITTI camera is
-    mounted ``tilt`` (0.4 deg) nose down, read back with the level camera: to the model, a road
-    falling 0.4 deg."""
+    mounted ``tilt`` radians nose down (default :data:`TILT`, 0.4 deg), read back with the level
+    camera: to the model, a road falling by ``tilt``."""
     nominal = Camera.kitti()
     mounted = eqx.tree_at(
         lambda c: c.rotation_body_to_camera,
