@@ -931,14 +931,19 @@ FORWARD_COLUMNS = [
 ]
 
 
+def _forward_rows(kind: str, first: str) -> str:
+    """The forward-fusion record's ``kind`` table (``runs`` or ``street_world``), sweep rows left out."""
+    rows = [
+        [f"{segment}: {name}"] + [num(m[key], digits) for key, _, digits in FORWARD_COLUMNS]
+        for segment, values in record(FORWARD_FUSION)[kind].items()
+        for name, m in values.items()
+        if "(sweep)" not in name
+    ]
+    return table([first] + [c[1] for c in FORWARD_COLUMNS], rows)
+
+
 def forward_fusion() -> str:
-    runs = record(FORWARD_FUSION)["runs"]
-    rows = []
-    for segment, values in runs.items():
-        for name, m in values.items():
-            if "(sweep)" not in name:
-                rows.append([f"{segment}: {name}"] + [num(m[key], digits) for key, _, digits in FORWARD_COLUMNS])
-    return table(["run: model"] + [c[1] for c in FORWARD_COLUMNS], rows)
+    return _forward_rows("runs", "run: model")
 
 
 def forward_fusion_sweep() -> str:
@@ -956,13 +961,7 @@ def forward_fusion_sweep() -> str:
 
 
 def forward_fusion_street_world() -> str:
-    worlds = record(FORWARD_FUSION)["street_world"]
-    rows = [
-        [f"{run}: {name}"] + [num(m[key], digits) for key, _, digits in FORWARD_COLUMNS]
-        for run, values in worlds.items()
-        for name, m in values.items()
-    ]
-    return table(["street world's copy: model"] + [c[1] for c in FORWARD_COLUMNS], rows)
+    return _forward_rows("street_world", "street world's copy: model")
 
 
 def real_kitti_keyframes_speed() -> str:

@@ -77,6 +77,11 @@ def test_needs_inputs():
         blocked_scan(lambda c, x: (c, c), jnp.zeros(2), None, block=2)
 
 
+def loops(jitted, *args) -> int:
+    """The number of loops in ``jitted``'s program for ``args``."""
+    return jitted.lower(*args).as_text().count("stablehlo.while")
+
+
 @pytest.fixture(scope="module")
 def drive():
     seq = simulate_planar_sequence(jax.random.PRNGKey(4), 103, yaw_rate_std=0.2)
@@ -89,10 +94,11 @@ def test_filters_with_auto_blocks_equal_their_plain_runs(drive, form):
     seq, fixes, prior = drive
     model = planar_pose_model()
 
-    def run(block):
-        return jax.jit(lambda p: form.filter(model, p, seq.increments, fixes, jnp.asarray(Q), jnp.asarray(R), block=block))(prior)
+    def filtered(block):
+        return jax.jit(lambda p: form.filter(model, p, seq.increments, fixes, jnp.asarray(Q), jnp.asarray(R), block=block))
 
-    blocked, plain = run("auto"), run(1)
+    assert loops(filtered("auto"), prior) > loops(filtered(1), prior) == 1  # the blocks are there
+    blocked, plain = filtered("auto")(prior), filtered(1)(prior)
     for name in blocked._fields:
         if name == "log_likelihood":  # a sum over the steps, reduced in another order
             np.testing.assert_allclose(blocked.log_likelihood, plain.log_likelihood, rtol=1e-14)
@@ -108,8 +114,9 @@ def test_smoother_with_auto_blocks_equals_its_plain_run(drive, recompute):
     if recompute:
         result = result._replace(smoother_gains=None)
 
-    def run(block):
-        return jax.jit(lambda r: smoother.smooth(model, r, seq.increments, jnp.asarray(Q), block=block))(result)
+    def smoothed(block):
+        return jax.jit(lambda r: smoother.smooth(model, r, seq.increments, jnp.asarray(Q), block=block))
 
-    for a, b in zip(run("auto"), run(1), strict=True):
+    assert loops(smoothed("auto"), result) > loops(smoothed(1), result) == 1
+    for a, b in zip(smoothed("auto")(result), smoothed(1)(result), strict=True):
         np.testing.assert_array_equal(a, b)

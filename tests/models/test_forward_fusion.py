@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from jbevo.inertial.kinematics import GRAVITY
-from jbevo.models.forward_fusion import COLD_SPEED_STD, WARM_SPEED_STD, ForwardFusion
+from jbevo.models.forward_fusion import COLD_SPEED_STD, MISSING_ACCEL_STD, WARM_SPEED_STD, ForwardFusion
 
 pytestmark = pytest.mark.usefixtures("float64")
 
@@ -38,7 +38,8 @@ def test_gravity_share_and_missing_samples():
     pitch = np.radians(2.0)  # nose down: a car at constant speed downhill reads f_x = -g sin(pitch)
     level = fusion.predict(state, block(-GRAVITY * np.sin(pitch)), jnp.float64(pitch), DT)
     np.testing.assert_allclose(level.mean, [5.0, 0.5], rtol=1e-12)
-    # A missing sample counts as the block's mean (0.5 here): the same as that sample measured.
+    # A missing sample counts as the block's mean (5/9 here), as that sample measured, but with
+    # the missing sample's walk.
     gap = np.array(block(np.r_[np.zeros(5), np.ones(5)]))
     gap[2] = np.nan
     filled = np.array(block(np.r_[np.zeros(5), np.ones(5)]))
@@ -46,6 +47,12 @@ def test_gravity_share_and_missing_samples():
     a = fusion.predict(state, jnp.asarray(gap), jnp.float64(0.0), DT)
     b = fusion.predict(state, jnp.asarray(filled), jnp.float64(0.0), DT)
     np.testing.assert_allclose(a.mean, b.mean, rtol=1e-12)
+    extra = (MISSING_ACCEL_STD**2 - float(jnp.exp(fusion.log_accel_std)) ** 2) * DT**2
+    assert float(a.cov[0, 0] - b.cov[0, 0]) == pytest.approx(extra, rel=1e-5)
+    # A block with no sample: gravity's share alone, and the speed grows uncertain.
+    dead = fusion.predict(state, jnp.full((10, 3), jnp.nan), jnp.float64(pitch), DT)
+    assert float(dead.mean[0]) == pytest.approx(5.0 + 10 * DT * GRAVITY * np.sin(pitch), rel=1e-12)
+    assert float(dead.cov[0, 0]) == pytest.approx(WARM_SPEED_STD**2 + 10 * (MISSING_ACCEL_STD * DT) ** 2, rel=1e-9)
 
 
 def test_the_travel_restarts_every_frame():

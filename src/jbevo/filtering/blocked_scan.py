@@ -1,7 +1,7 @@
 """``lax.scan`` in blocks whose buffers stay small, for the filters' few-number steps on XLA:CPU.
 
 XLA:CPU runs the body of a loop as a sequence of kernels ("thunks"). It runs them one after the
-other only when every buffer they touch is at most 512 bytes (or there are at most 8 of them);
+other only when every buffer they touch is at most 512 bytes (or the body has at most 8 kernels);
 otherwise it schedules them as a dependency graph, which costs an allocation and queue work on
 every iteration. A plain ``lax.scan`` body always touches the whole stacked inputs and outputs
 (``(T, ...)`` arrays), so a filter step of a 3-state model, a few dozen small kernels, is run as
@@ -9,10 +9,12 @@ a graph on every step.
 
 :func:`blocked_scan` runs the same recursion as two nested scans: the outer one over blocks of
 ``K`` steps, the inner one over the steps of a block, whose stacked inputs and outputs are
-``(K, ...)`` arrays. ``K`` is chosen so that every per-block slice fits in 512 bytes, so the inner body,
-where the work is, runs in order. Each step computes what ``lax.scan``'s step computes, on the
-same values in the same order: the per-step results are bit for bit the same (a sum over all
-steps taken afterwards may round differently). ``benchmarks/ukf.py`` times it on the 3-state
+``(K, ...)`` arrays. ``K`` is chosen so that every per-block slice of the stacked inputs and outputs (and the carry)
+fits in 512 bytes; the inner body, where the work is, then runs in order if the step's own
+intermediates are that small too (``block_size`` does not see them: a step with larger ones
+gains nothing and pays the nesting). Each step runs the same operations as ``lax.scan``'s step,
+on the same values in the same order; the tests and ``benchmarks/ukf.py`` find the per-step
+results equal bit for bit (a sum over all steps taken afterwards may round differently). ``benchmarks/ukf.py`` times it on the 3-state
 localization UKF (docs/filtering.md has the table): the forward filters and the filter + RTS
 smoother of one sequence run faster; under ``vmap`` the batch makes every buffer large anyway and
 the blocks only add work, and so do gradients, whose stored residuals are large (and which take

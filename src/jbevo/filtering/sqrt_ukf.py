@@ -18,9 +18,9 @@ conditioning that matters is that of the factor (the square root of the covarian
   are zeroed and the noise's factor is that of R with their rows and columns replaced by the
   identity (``chol(R)`` itself when nothing is missing), which is the covariance form's
   replacement of their rows and columns of ``S`` by the identity; their columns of the gain are
-  then zero. Only with missing entries is R formed from its factor (``chol(R) chol(R)^T``) and
-  factored again, once per step: an ``m x m`` noise block keeps the update's stack at ``m + n``
-  rows by ``2n + 1 + m`` columns.
+  then zero. That factor is computed every step (R formed from its factor, ``chol(R) chol(R)^T``,
+  and factored again) and selected where an entry is missing: an ``m x m`` noise block keeps the
+  update's stack at ``m + n`` rows by ``2n + 1 + m`` columns.
 
 The weights of the default :class:`~jbevo.filtering.unscented.MerweScaled` scheme have
 ``Wc_0 = 2 > 0``; schemes with a negative ``Wc_0`` use the downdate, which needs the result to

@@ -44,6 +44,10 @@ from jbevo.inertial.kinematics import GRAVITY, fill_missing
 
 _TRAVEL = jnp.array([0.0, 1.0])
 
+#: The speed's walk (m/s^2) over a missing IMU sample, which is filled with the block's mean (or
+#: zero when the whole block is missing): about a car's range of acceleration.
+MISSING_ACCEL_STD = 3.0
+
 #: The speed's prior standard deviation (m/s) started from the truth's speed (a warm start) and
 #: from none (a cold start: the car may already be moving; the accelerometer cannot tell).
 WARM_SPEED_STD, COLD_SPEED_STD = 0.1, 5.0
@@ -81,22 +85,26 @@ class ForwardFusion(eqx.Module):
         self, state: ukf.GaussianState, accel: Float[Array, "S 3"], pitch: Float[Array, ""], dt: float
     ) -> ukf.GaussianState:
         """A frame's IMU block: the travel reset to zero, then each sample's forward specific force
-        (``accel[:, 0]``; missing samples filled with the block's mean, as the attitude filter
-        does) integrated at the body's ``pitch``."""
+        (``accel[:, 0]``) integrated at the body's ``pitch``. A missing sample (a NaN row) is
+        filled with the block's mean, as the attitude filter does, and walks the speed by
+        :data:`MISSING_ACCEL_STD` instead of ``accel_std``."""
         dtype = state.mean.dtype
         speed, speed_var = state.mean[0], state.cov[0, 0]
-        q = (jnp.exp(self.log_accel_std) * dt).astype(dtype) ** 2
+        missing = jnp.any(jnp.isnan(accel), axis=-1)
+        std = jnp.where(missing, MISSING_ACCEL_STD, jnp.exp(self.log_accel_std))
+        qs = (std.astype(dtype) * dt) ** 2
         accel = (fill_missing(accel)[:, 0] + GRAVITY * jnp.sin(pitch)).astype(dtype)
 
-        def sample(carry, a):
+        def sample(carry, inputs):
             mean, cov = carry
+            a, q = inputs
             f = jnp.array([[1.0, 0.0], [dt, 1.0]], dtype)
             mean = f @ mean + jnp.stack([a * dt, 0.5 * a * dt**2])  # exact for a constant ``a``
             cov = f @ cov @ f.T + jnp.diag(jnp.stack([q, jnp.zeros((), dtype)]))
             return (mean, cov), None
 
         start = (jnp.stack([speed, jnp.zeros((), dtype)]), jnp.diag(jnp.stack([speed_var, jnp.zeros((), dtype)])))
-        (mean, cov), _ = jax.lax.scan(sample, start, accel)
+        (mean, cov), _ = jax.lax.scan(sample, start, (accel, qs))
         return ukf.GaussianState(mean, cov)
 
     def update(
@@ -119,4 +127,4 @@ class ForwardFusion(eqx.Module):
         return state.mean[1]
 
 
-__all__ = ["COLD_SPEED_STD", "WARM_SPEED_STD", "ForwardFusion"]
+__all__ = ["COLD_SPEED_STD", "MISSING_ACCEL_STD", "WARM_SPEED_STD", "ForwardFusion"]
