@@ -42,7 +42,9 @@ from jaxtyping import Array, Bool, Float
 from jbevo.filtering import ukf
 from jbevo.inertial.kinematics import GRAVITY, fill_missing
 
-_TRAVEL = jnp.array([0.0, 1.0])
+#: The measurement row of the travel (a tuple: no JAX array at import, which would start the
+#: backend before a multi-process job can join).
+_TRAVEL = (0.0, 1.0)
 
 #: The speed's walk (m/s^2) over a missing IMU sample, which is filled with the block's mean (or
 #: zero when the whole block is missing): about a car's range of acceleration.
@@ -119,7 +121,7 @@ class ForwardFusion(eqx.Module):
         innovation = z - state.mean[1]
         scale = jnp.maximum(jnp.abs(z), self.displacement_floor)
         variance = (jnp.exp(self.log_displacement_std).astype(dtype) * scale) ** 2 + innovation**2
-        return ukf.linear_update(state, _TRAVEL.astype(dtype), innovation, variance, ok)
+        return ukf.linear_update(state, jnp.asarray(_TRAVEL, dtype), innovation, variance, ok)
 
     @staticmethod
     def travel(state: ukf.GaussianState) -> Float[Array, ""]:
