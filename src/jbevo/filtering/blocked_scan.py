@@ -9,13 +9,14 @@ a graph on every step.
 
 :func:`blocked_scan` runs the same recursion as two nested scans: the outer one over blocks of
 ``K`` steps, the inner one over the steps of a block, whose stacked inputs and outputs are
-``(K, ...)`` arrays. ``K`` is chosen so that every per-block slice of the stacked inputs and outputs (and the carry)
-fits in 512 bytes; the inner body, where the work is, then runs in order if the step's own
-intermediates are that small too (``block_size`` does not see them: a step with larger ones
-gains nothing and pays the nesting). Each step runs the same operations as ``lax.scan``'s step,
-on the same values in the same order; the tests and ``benchmarks/ukf.py`` find the per-step
-results equal bit for bit (a sum over all steps taken afterwards may round differently). ``benchmarks/ukf.py`` times it on the 3-state
-localization UKF (docs/filtering.md has the table): the forward filters and the filter + RTS
+``(K, ...)`` arrays. ``K`` is chosen so that every per-block slice of the stacked inputs and
+outputs (and the carry) fits in 512 bytes; the inner body, where the work is, then runs in order
+if the step's own intermediates are that small too (``block_size`` does not see them: a step
+with larger ones gains nothing and pays the nesting). Each step runs the same operations as
+``lax.scan``'s step, on the same values in the same order; the tests and ``benchmarks/ukf.py``
+find the per-step results equal bit for bit (a sum over all steps taken afterwards may round
+differently). ``benchmarks/ukf.py`` times it on the 3-state localization UKF (docs/filtering.md
+has the table): the forward filters and the filter + RTS
 smoother of one sequence run faster; under ``vmap`` the batch makes every buffer large anyway and
 the blocks only add work, and so do gradients, whose stored residuals are large (and which take
 longer to compile). The filters therefore take ``block=1`` (one ``lax.scan``) by default and
@@ -58,10 +59,10 @@ def block_size(f: Callable, init: Any, xs: Any, length: int) -> int:
     """
     if jax.default_backend() != "cpu" or length < 2:
         return 1
-    x0 = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), xs)
-    _, y0 = jax.eval_shape(f, init, x0)
     if max((_bytes(leaf) for leaf in jax.tree.leaves(init)), default=0) > SEQUENTIAL_BUFFER_BYTES:
         return 1
+    x0 = jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape[1:], a.dtype), xs)
+    _, y0 = jax.eval_shape(f, init, x0)  # traces the step only where the carry fits
     widest = max([_step_bytes(leaf) for leaf in jax.tree.leaves(xs)] + [_bytes(leaf) for leaf in jax.tree.leaves(y0)])
     most = min(SEQUENTIAL_BUFFER_BYTES // max(widest, 1), length)
     if most < 2:

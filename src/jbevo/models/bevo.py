@@ -371,16 +371,16 @@ class Bevo(eqx.Module):
         if self.yaw_fusion is not None:
             rotation = self.yaw_fusion.fuse(rotation, gyro_turn.astype(rotation.dtype))
         increment = jnp.where(moving, bev_increment(self.grid, rotation, translation), 0.0)
+        dpc_forward = increment[0]  # the attitude filter's speed measurement, with or without fusion
         forward = carry.forward
         if self.forward is not None:
             # The forward speed through the IMU block at the body's pitch against gravity, then
             # DPC's forward increment; the posterior travel is the frame's forward motion.
             forward = self.forward.predict(forward, frame.accel, belief.pitch.astype(forward.mean.dtype), self.attitude.dt)
-            forward = self.forward.update(forward, increment[0], moving)
-        belief = self.attitude.update_speed(belief, jnp.where(moving, increment[0] / frame_dt, jnp.nan))
-        belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
-        if self.forward is not None:
+            forward = self.forward.update(forward, dpc_forward, moving)
             increment = increment.at[0].set(jnp.where(moving, ForwardFusion.travel(forward).astype(increment.dtype), 0.0))
+        belief = self.attitude.update_speed(belief, jnp.where(moving, dpc_forward / frame_dt, jnp.nan))
+        belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
         confidence = jnp.where(moving, reg.confidence, 0.0)
         return Observation(belief, tilt, pitch_roll, bev, increment, confidence, gyro_turn.astype(bev.dtype), keyframe, forward)
 

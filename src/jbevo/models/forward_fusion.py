@@ -9,8 +9,8 @@ texture fixes the forward one. The accelerometer measures exactly that axis's ch
 (m/s) and the distance travelled since the previous frame (m). Within a frame each IMU sample
 moves the speed by ``a dt`` with ``a = f_x + g sin(pitch)`` (the specific force's forward axis
 and gravity's share at the body's pitch, positive nose down, as :mod:`jbevo.inertial.speed_aided`
-models it) and the travel by ``speed dt + a dt^2 / 2``; the speed walks by ``accel_std`` m/s^2 per sample (accelerometer
-noise, vibration and the pitch error's gravity share). DPC's forward increment measures the travel
+models it) and the travel by ``speed dt + a dt^2 / 2``; the speed walks by ``accel_std`` m/s^2
+per sample (accelerometer noise, vibration and the pitch error's gravity share). DPC's forward increment measures the travel
 with a standard deviation of ``displacement_std`` times the increment (at least
 ``displacement_floor`` metres), Cauchy-like robust (the variance grows with the squared innovation,
 as :meth:`jbevo.inertial.speed_aided.SpeedAidedAttitude.update_speed` does), and the posterior
