@@ -34,6 +34,11 @@ class BevGrid(eqx.Module):
             origin = (shape[0] - 1 + near / resolution, (shape[1] - 1) / 2)
         self.origin = (float(origin[0]), float(origin[1]))
 
+    @property
+    def centre_distance(self) -> float:
+        """The ground distance ``x`` of the raster's centre row (metres)."""
+        return (self.origin[0] - (self.shape[0] - 1) / 2) * self.resolution
+
     def ground_points(self) -> Float[Array, "H W 2"]:
         """Level-frame ground coordinates ``(x, y)`` of every pixel centre."""
         rows = jnp.arange(self.shape[0], dtype=jnp.float32)

@@ -193,14 +193,23 @@ class SpeedAidedAttitude(FilterNoise):
     def _std(self) -> Float[Array, " 2"]:
         return jnp.exp(self.measurement_noise.log_std)
 
-    def update_speed(self, state: AttitudeState, speed: Float[Array, ""], robust: bool = True) -> AttitudeState:
-        """Condition on the odometry's forward ``speed`` (m/s; NaN: no update). With ``robust``
-        the variance grows with the squared innovation (Cauchy-like), so gross odometry failures
-        lose their weight instead of pulling the state."""
+    def speed_measurement(
+        self, state: AttitudeState, speed: Float[Array, ""], robust: bool = True
+    ) -> tuple[Float[Array, ""], Float[Array, ""], Bool[Array, ""]]:
+        """The odometry's forward ``speed`` (m/s) against the belief: its innovation (zero where
+        ``speed`` is NaN), variance and whether it is usable. With ``robust`` the variance grows
+        with the squared innovation (Cauchy-like), so gross odometry failures lose their weight
+        instead of pulling the state."""
         innovation = jnp.asarray(speed, state.mean.dtype) - state.speed
         ok = jnp.isfinite(innovation)
         innovation = jnp.where(ok, innovation, 0.0)
         variance = self._std()[1] ** 2 + (innovation**2 if robust else 0.0)
+        return innovation, variance, ok
+
+    def update_speed(self, state: AttitudeState, speed: Float[Array, ""], robust: bool = True) -> AttitudeState:
+        """Condition on the odometry's forward ``speed`` (m/s; NaN: no update; ``robust`` as in
+        :meth:`speed_measurement`)."""
+        innovation, variance, ok = self.speed_measurement(state, speed, robust)
         return self.update_linear(state, AttitudeState.row(speed=1.0, dtype=state.mean.dtype), innovation, variance, ok)
 
     def update_lateral_tilt(

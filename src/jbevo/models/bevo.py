@@ -48,7 +48,8 @@ view (:mod:`jbevo.vision.road_view`: the camera's pitch, roll and height against
 road corridor that fades parked cars and facades; 4 learnable), the yaw fusion
 (:mod:`jbevo.models.yaw_fusion`: DPC's turn averaged with the gyro's; 1) and the road tilt
 (:mod:`jbevo.models.road_tilt`: with bands, the slope measures the road's grade, a state of its
-own added to the projection's pitch, instead of correcting the pitch against gravity; 1).
+own added to the projection's pitch, instead of correcting the pitch against gravity, and the
+odometry's speed measures it together with the filter's speed; 1).
 """
 
 from __future__ import annotations
@@ -162,7 +163,9 @@ class Bevo(eqx.Module):
             rotation averaged with the gyro's yaw increment by inverse variance.
         road_tilt: :class:`jbevo.models.road_tilt.RoadTilt`, or None (off): with bands and the
             filter's attitude, the bands' slope updates the road's tilt (added to the pitch the
-            BEV is projected with) instead of the filter's pitch against gravity.
+            BEV is projected with) instead of the filter's pitch against gravity, and the
+            odometry's speed updates the tilt and the filter's speed together
+            (:meth:`jbevo.models.road_tilt.RoadTilt.update_with_speed`).
         forward: :class:`jbevo.models.forward_fusion.ForwardFusion`, or None (off): the forward
             motion per frame from the accelerometer's speed and DPC's increment together (the
             attitude filter still takes DPC's own).
@@ -379,7 +382,12 @@ class Bevo(eqx.Module):
             forward = self.forward.predict(forward, frame.accel, belief.pitch.astype(forward.mean.dtype), self.attitude.dt)
             forward = self.forward.update(forward, dpc_forward, moving)
             increment = increment.at[0].set(jnp.where(moving, ForwardFusion.travel(forward).astype(increment.dtype), 0.0))
-        belief = self.attitude.update_speed(belief, jnp.where(moving, dpc_forward / frame_dt, jnp.nan))
+        speed = jnp.where(moving, dpc_forward / frame_dt, jnp.nan)
+        if self.road_tilt is None:
+            belief = self.attitude.update_speed(belief, speed)
+        else:
+            sensitivity = 2.0 * self.grid.centre_distance / self.camera_height(camera, bev.dtype)
+            belief, tilt = self.road_tilt.update_with_speed(self.attitude, belief, tilt, speed, sensitivity)
         belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
         confidence = jnp.where(moving, reg.confidence, 0.0)
         return Observation(belief, tilt, pitch_roll, bev, increment, confidence, gyro_turn.astype(bev.dtype), keyframe, forward)

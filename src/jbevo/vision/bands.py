@@ -222,8 +222,7 @@ class BandGeometry(eqx.Module):
         travel = self._extrapolate(self.remove_drift(shifts, grid, params, height, drift).forward, grid, params)
         lat_far, lat_near = shifts.lateral[0], shifts.lateral[1]
         turn = (lat_far - lat_near) / (x_far - x_near)
-        x_centre = (grid.origin[0] - (grid.shape[0] - 1) / 2) * grid.resolution
-        lateral = lat_near + (x_centre - x_near) * turn
+        lateral = lat_near + (grid.centre_distance - x_near) * turn
         rotation = reg.rotation - jnp.exp(self.log_yaw_gain) * turn
         return rotation, jnp.stack([lateral, travel]) / grid.resolution
 
