@@ -19,7 +19,7 @@ hand-set walk, ``q`` = 0.0025 rad per square-root metre, is a degree over about 
 The bands engage only from a travel per frame (:attr:`jbevo.vision.bands.BandGeometry.min_travel`);
 below it the tilt used to stay where the last engaged frame left it, and a stale tilt scales
 DPC's forward motion by ``1 - 2 x e / h`` (``e`` the projection's pitch error, ``x`` the BEV's
-centre distance: 36 % per degree on the real-street grid). The odometry's speed, which the
+centre distance: 35 % per degree on the real-street grid). The odometry's speed, which the
 attitude filter takes as a measurement of its speed state, therefore measures the tilt too:
 :meth:`RoadTilt.update_with_speed` conditions both beliefs on it at once, with the coefficient
 ``v 2 x / h`` on the tilt, so a speed that disagrees with the accelerometer's integration moves the
