@@ -14,6 +14,7 @@ from jbevo.inertial.kinematics import (
     GRAVITY,
     accel_tilt,
     euler_rates,
+    forward_acceleration,
     tilt_measurements,
 )
 
@@ -33,6 +34,17 @@ def test_tilt_of_gravity_is_exact(float64):
     e = np.stack([rng.uniform(-3, 3, 20), rng.uniform(-1, 1, 20), rng.uniform(-1, 1, 20)], -1)
     f = np.einsum("nji,j->ni", rotation_zyx(e), [0.0, 0.0, GRAVITY])
     np.testing.assert_allclose(accel_tilt(jnp.asarray(f)), e[:, 1:], atol=1e-12)
+
+
+def test_forward_acceleration_is_the_body_x_share_of_the_acceleration(float64):
+    # Specific force f = R^T (a + g z); f_x + g sin(pitch) must leave the body-x part of a only.
+    rng = np.random.default_rng(2)
+    e = np.stack([rng.uniform(-3, 3, 20), rng.uniform(-0.5, 0.5, 20), rng.uniform(-0.5, 0.5, 20)], -1)
+    a = rng.normal(size=(20, 3))
+    r = rotation_zyx(e)
+    f = np.einsum("nji,nj->ni", r, a + [0.0, 0.0, GRAVITY])
+    expected = np.einsum("nji,nj->ni", r, a)[:, 0]
+    np.testing.assert_allclose(forward_acceleration(jnp.asarray(f[:, 0]), jnp.asarray(e[:, 1])), expected, atol=1e-12)
 
 
 def wobbly_drive(seconds: float = 60.0, seed: int = 0):

@@ -32,6 +32,13 @@ def gyro_yaw_increment(gyro: Float[Array, "S 3"], pitch: Array, roll: Array, dt:
     return dt * jnp.sum(rate)
 
 
+def forward_acceleration(forward_force: Array, pitch: Array) -> Array:
+    """The rate of change of the forward speed, ``f_x + g sin(pitch)`` (m/s^2): the specific
+    force's forward axis plus gravity's share along it at ``pitch`` (positive nose down; at rest
+    on a slope the two cancel)."""
+    return forward_force + GRAVITY * jnp.sin(pitch)
+
+
 def accel_tilt(accel: Float[Array, "... 3"]) -> Float[Array, "... 2"]:
     """``(pitch, roll)`` of a specific-force vector (gravity only: exact)."""
     ax, ay, az = accel[..., 0], accel[..., 1], accel[..., 2]
@@ -80,6 +87,7 @@ __all__ = [
     "body_acceleration",
     "euler_rates",
     "fill_missing",
+    "forward_acceleration",
     "gyro_yaw_increment",
     "tilt_measurements",
     "valid_mean",

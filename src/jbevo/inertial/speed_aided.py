@@ -30,7 +30,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from jbevo.filtering import smoother, ukf
 from jbevo.filtering.noise import DiagonalCovariance
 from jbevo.inertial.attitude_filter import FilterNoise
-from jbevo.inertial.kinematics import GRAVITY, euler_rates, fill_missing, valid_mean
+from jbevo.inertial.kinematics import GRAVITY, euler_rates, fill_missing, forward_acceleration, valid_mean
 
 #: The state's entries, in order.
 SPEED_AIDED_STATE = ("pitch", "roll", "gyro_bias_x", "gyro_bias_y", "gyro_bias_z", "speed")
@@ -115,7 +115,7 @@ def _motion(state: Float[Array, " 6"], control, dt: float) -> Float[Array, " 6"]
     def step(s, sample):
         omega, f = sample
         pitch_dot, roll_dot = euler_rates(s[0], s[1], omega - bias)
-        speed_dot = f[0] + GRAVITY * jnp.sin(s[0])
+        speed_dot = forward_acceleration(f[0], s[0])
         return s + dt * jnp.stack([pitch_dot, roll_dot, speed_dot]), None
 
     s, _ = jax.lax.scan(step, jnp.stack([state[_PITCH], state[_ROLL], state[_SPEED]]), (gyro, accel))

@@ -66,7 +66,15 @@ from jbevo.filtering.ukf import GaussianState
 from jbevo.geometry.bev_grid import BevGrid
 from jbevo.geometry.camera import Camera
 from jbevo.geometry.se2 import se2_compose
-from jbevo.inertial.kinematics import GRAVITY, accel_tilt, euler_rates, gyro_yaw_increment, tilt_measurements, valid_mean
+from jbevo.inertial.kinematics import (
+    GRAVITY,
+    accel_tilt,
+    euler_rates,
+    forward_acceleration,
+    gyro_yaw_increment,
+    tilt_measurements,
+    valid_mean,
+)
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 from jbevo.models.forward_fusion import COLD_SPEED_STD, WARM_SPEED_STD, ForwardFusion
 from jbevo.models.parameters import num_learnable
@@ -275,7 +283,7 @@ class Bevo(eqx.Module):
         if warm_start:
             truth0 = seq.pitch_roll[0]
             tilt0 = truth0 - dt * jnp.stack(euler_rates(truth0[0], truth0[1], gyro0))
-            speed_dot = force0[0] + GRAVITY * jnp.sin(truth0[0])
+            speed_dot = forward_acceleration(force0[0], truth0[0])
             speed0 = jnp.linalg.norm(seq.planar[1, :2] - seq.planar[0, :2]) / dt - 1.5 * dt * speed_dot
             return AttitudeState.initial(tilt0, speed0, 0.002, 0.005, 0.1)
         tilt_mid = accel_tilt(force0)

@@ -40,7 +40,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from jbevo.filtering import ukf
-from jbevo.inertial.kinematics import GRAVITY, fill_missing
+from jbevo.inertial.kinematics import fill_missing, forward_acceleration
 
 #: The measurement row of the travel (a tuple: no JAX array at import, which would start the
 #: backend before a multi-process job can join).
@@ -95,7 +95,7 @@ class ForwardFusion(eqx.Module):
         missing = jnp.any(jnp.isnan(accel), axis=-1)
         std = jnp.where(missing, MISSING_ACCEL_STD, jnp.exp(self.log_accel_std))
         qs = (std.astype(dtype) * dt) ** 2
-        accel = (fill_missing(accel)[:, 0] + GRAVITY * jnp.sin(pitch)).astype(dtype)
+        accel = forward_acceleration(fill_missing(accel)[:, 0], pitch).astype(dtype)
 
         def sample(carry, inputs):
             mean, cov = carry
