@@ -21,9 +21,12 @@ the last one at which the bands engaged; they engage once the travel since reach
 (both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
 ``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
 ``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11),
-``street + robust bands, learned`` those, the bands' two and the road tilt's walk (14). The step
-count is fixed in advance (``--steps``); no checkpoint is selected, so no test frame chooses
-anything. Peers on the same frames: ``cv2.phaseCorrelate`` between the same BEV pairs as the
+``street + robust bands, learned`` those, the bands' two and the road tilt's walk (14). Each fit
+holds out the last third of its training half (``VALIDATION_SHARE``) and keeps, among the
+starting (hand-set) parameters and every ``--every`` of its ``--steps`` Adam steps, the checkpoint
+with the lowest final error on those frames (run from their first frame's true state); no frame
+of the scored half chooses anything. ``checkpoint_selection[<run>][<variant>][trained on the
+<half>]``: per seed, the chosen ``step`` and the validation error at each checkpoint. Peers on the same frames: ``cv2.phaseCorrelate`` between the same BEV pairs as the
 hand-set street model's (translation only; the turn from the gyro, as the street model's
 fusion mostly takes it), and a monocular essential-matrix VO (ORB features,
 ``cv2.findEssentialMat`` with RANSAC, ``cv2.recoverPose``) whose unit steps get their length
@@ -50,9 +53,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import NamedTuple
 
 import cv2
 import equinox as eqx
@@ -83,6 +89,11 @@ RUNS = {"06": "kitti_odometry_06_first51", "07": "kitti_odometry_07_first160"}
 CALIBRATION_DAY = "2011_09_30"
 HALVES = ("first half", "second half")
 RESULTS = Path(__file__).parent / "results"
+#: The share of a training half held out at its end to choose the learned rows' checkpoint.
+VALIDATION_SHARE = 1 / 3
+#: Adam steps between the checkpoints that the held-out frames choose among (step 0, the
+#: hand-set parameters, is one of them).
+CHECK_EVERY = 10
 #: Rows timed once more after compiling (``frames_per_s[<run>][<variant>]``, this machine).
 TIMED = ("street + robust bands", "street + robust bands, keyframes")
 
@@ -233,22 +244,73 @@ class Trainer:
         self.static = static
 
 
-def fit(trainer: Trainer, train: sq.Sequence | list[sq.Sequence], steps: int, seed: int, window: int, batch: int) -> Bevo:
+class Fitted(NamedTuple):
+    """A fit's chosen parameters, the step they are from (0: the starting parameters) and the
+    validation error at every checkpoint (``{step: error}``; empty without validation)."""
+
+    model: Bevo
+    step: int
+    validation: dict[int, float]
+
+
+def fit(
+    trainer: Trainer,
+    train: sq.Sequence | list[sq.Sequence],
+    steps: int,
+    seed: int,
+    window: int,
+    batch: int,
+    validate: Callable[[Bevo], float] | None = None,
+    every: int = CHECK_EVERY,
+) -> Fitted:
     """``steps`` steps (fixed in advance) of ``trainer`` from its starting parameters over
     batches of ``batch`` random ``window``-frame windows of ``train`` (one sequence or several
-    with the same camera)."""
+    with the same camera). With ``validate`` (a model's error on held-out frames), the
+    checkpoint with the lowest error among the starting parameters and every ``every`` steps
+    is kept; without it, the last."""
     params, step = trainer.params, trainer.step
     parts = [sq.windows(s, window, 1) for s in (train if isinstance(train, list) else [train])]
     windows = jax.tree_util.tree_map(lambda *x: jnp.concatenate(x), *parts)
     rng = np.random.default_rng(seed)
     opt_state = trainer.optimizer.init(params)
     count = windows.frame_times.shape[0]
-    for _ in range(steps):
+    curve: dict[int, float] = {}
+    best = (np.inf, 0, params)
+
+    def check(k: int, params) -> tuple:
+        if validate is None:
+            return best
+        error = float(validate(eqx.combine(params, trainer.static)))
+        curve[k] = error
+        # A non-finite validation error never wins.
+        return (error, k, params) if np.isfinite(error) and error < best[0] else best
+
+    best = check(0, params)
+    for k in range(1, steps + 1):
         idx = rng.choice(count, size=min(batch, count), replace=False)
         params, opt_state, loss = step(params, opt_state, jax.tree_util.tree_map(lambda x, idx=idx: x[idx], windows))
         if not np.isfinite(float(loss)):
             raise RuntimeError("the training loss is not finite")
-    return eqx.combine(params, trainer.static)
+        if k % every == 0 or k == steps:
+            best = check(k, params)
+    if validate is None:
+        return Fitted(eqx.combine(params, trainer.static), steps, curve)
+    return Fitted(eqx.combine(best[2], trainer.static), best[1], curve)
+
+
+def split_training(start: int, stop: int) -> tuple[tuple[int, int], tuple[int, int]]:
+    """A training half's frames ``[start, stop)`` as the frames fitted and, at its end, the
+    :data:`VALIDATION_SHARE` held out to choose the checkpoint (the two share one frame, as the
+    halves do: the validation's first increment ends at its second frame)."""
+    cut = stop - max(2, round((stop - start) * VALIDATION_SHARE))
+    return (start, cut + 1), (cut, stop)
+
+
+def validation_error(model: Bevo, seq: sq.Sequence) -> float:
+    """The final position error (% of the distance) of ``model`` run over ``seq`` from its
+    first frame's true state (a validation window)."""
+    out = run_bevo(model, seq, warm_start=True)
+    return scores(out.increments, out.pitch_roll, seq, 0, seq.num_frames)["final_pct"]
 
 
 def learned_parameters(model: Bevo) -> dict:
@@ -342,6 +404,7 @@ def summarise(values: list[dict]) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--steps", type=int, default=40, help="Adam steps per learned model (fixed in advance)")
+    parser.add_argument("--every", type=int, default=CHECK_EVERY, help="steps between the checkpoints validation chooses among")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--window", type=int, default=8, help="frames per training window")
     parser.add_argument("--batch", type=int, default=4, help="windows per step")
@@ -361,6 +424,7 @@ def main() -> None:
     }
     table: dict[str, dict] = {}
     learned_params: dict[str, dict] = {}
+    selection: dict[str, dict] = {}
     frames_per_s: dict[str, dict] = {}
 
     def put(run: str, variant: str, per_segment: dict[str, dict]) -> None:
@@ -409,16 +473,30 @@ def main() -> None:
         for label, (bands, select) in LEARNED.items():
             trainer = Trainer(street_model(seq.imu_dt, bands=bands), select, args.lr)
             for test_half, train_half in zip(HALVES, HALVES[::-1]):
-                start, stop = half_frames(n, train_half)
+                (start, stop), (v_start, v_stop) = split_training(*half_frames(n, train_half))
                 train = sq.window(seq, start, stop - start)
+                held_out = sq.window(seq, v_start, v_stop - v_start)
                 per_seed = []
                 for seed in range(args.seeds):
-                    model = fit(trainer, train, args.steps, seed, args.window, args.batch)
-                    out = run_bevo(model, seq, warm_start=True)
+                    fitted = fit(
+                        trainer,
+                        train,
+                        args.steps,
+                        seed,
+                        args.window,
+                        args.batch,
+                        functools.partial(validation_error, seq=held_out),
+                        args.every,
+                    )
+                    out = run_bevo(fitted.model, seq, warm_start=True)
                     per_seed.append(scores(out.increments, out.pitch_roll, seq, *half_frames(n, test_half)))
-                    learned_params.setdefault(name, {}).setdefault(label, {}).setdefault(
-                        f"trained on the {train_half}", []
-                    ).append(learned_parameters(model))
+                    trained_on = f"trained on the {train_half}"
+                    learned_params.setdefault(name, {}).setdefault(label, {}).setdefault(trained_on, []).append(
+                        learned_parameters(fitted.model)
+                    )
+                    selection.setdefault(name, {}).setdefault(label, {}).setdefault(trained_on, []).append(
+                        {"step": fitted.step, "validation_final_pct": fitted.validation}
+                    )
                 put(name, label, {test_half: summarise(per_seed)})
                 print(
                     f"  {label}, tested on the {test_half}: {table[f'{name} {test_half}'][label]['final_pct']:.2f} % final",
@@ -441,6 +519,7 @@ def main() -> None:
                 name: {"frames": GYRO_WINDOW, "from_frame": gyro_alone_drift(seq)} for name, (_, seq) in runs.items()
             },
             "learned_parameters": learned_params,
+            "checkpoint_selection": selection,
             "frames_per_s": frames_per_s,
             "seconds": time.time() - started,
             "device": jax.devices()[0].device_kind,

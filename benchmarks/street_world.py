@@ -16,9 +16,11 @@ with keyframes for its bands.
 Zero-shot. The preset street model learns its road view, yaw fusion, DPC and bands (14 numbers)
 on street-world drives only: the first ``--frames`` frames of KITTI 00, 02, 05 and 08's motion
 (simulated IMU, the street's random grade and banking; none of them is a real run scored here), ``--steps``
-Adam steps fixed in advance, ``--seeds`` seeds, no checkpoint selection; it is then run on the
-real frames. Metrics and keys as ``real_kitti.py``: ``runs[<run>][<world>][<model>][<metric>]``
-with ``<run>`` 06, 07 and their halves, and ``zero_shot[<run>][<metric>]`` (mean, std, seeds).
+Adam steps, ``--seeds`` seeds, keeping the checkpoint (among the hand-set parameters and every
+``--every`` steps) with the lowest final error on a held-out street-world drive (00's motion after
+its training frames, ``VALIDATION_FRAMES`` of them); it is then run on the real frames. Metrics and keys as ``real_kitti.py``: ``runs[<run>][<world>][<model>][<metric>]``
+with ``<run>`` 06, 07 and their halves, and ``zero_shot[<run>][<metric>]`` (mean, std, seeds); ``zero_shot_checkpoints``: per seed, the chosen
+``step`` and the validation error at each checkpoint.
 
 Keyframes, held out. The preset with and without keyframes on the zero-shot drives themselves
 (street world, no real run): ``keyframes_check[<drive>][<model>][<segment>][<metric>]``, with
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import os
 import time
 from pathlib import Path
@@ -45,7 +48,18 @@ from jbevo.files import write_json_atomic
 from jbevo.models import Bevo
 from jbevo.models.presets import STREET_GRID, street_model
 from jbevo.models.runners import run_bevo
-from real_kitti import LEARNED, RESULTS, Trainer, fit, learned_parameters, load_runs, segments, summarise
+from real_kitti import (
+    CHECK_EVERY,
+    LEARNED,
+    RESULTS,
+    Trainer,
+    fit,
+    learned_parameters,
+    load_runs,
+    segments,
+    summarise,
+    validation_error,
+)
 
 #: The street world less one failure mode at a time.
 ABLATIONS = {
@@ -61,6 +75,8 @@ ABLATIONS = {
     "flat world": None,
 }
 ZERO_SHOT_DRIVES = ("00", "02", "05", "08")
+#: The zero-shot fit's held-out drive: this many frames of 00's motion after its training frames.
+VALIDATION_FRAMES = 100
 #: The rows run on the zero-shot drives themselves (``keyframes_check``).
 KEYFRAMES_CHECK = ("street + robust bands", "street + robust bands, keyframes")
 
@@ -80,7 +96,8 @@ def hand_set(imu_dt: float) -> dict[str, Bevo]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=40, help="Adam steps of the zero-shot fit (fixed in advance)")
+    parser.add_argument("--steps", type=int, default=40, help="Adam steps of the zero-shot fit")
+    parser.add_argument("--every", type=int, default=CHECK_EVERY, help="steps between the checkpoints validation chooses among")
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--frames", type=int, default=200, help="frames of each street-world training drive")
     parser.add_argument("--window", type=int, default=8)
@@ -142,11 +159,31 @@ def main() -> None:
 
     bands, select = LEARNED["street + robust bands, learned"]
     trainer = Trainer(street_model(imu_dt, bands=bands), select, args.lr)
+    held_out = kitti_sequence(
+        read_kitti(poses_folder / f"{ZERO_SHOT_DRIVES[0]}.txt").poses,
+        args.frames,
+        VALIDATION_FRAMES,
+        camera=camera,
+        world=world,
+        seed=len(ZERO_SHOT_DRIVES),
+        street=STREET,
+    )
     zero_shot: dict[str, list] = {}
-    parameters = []
+    parameters, checkpoints = [], []
     for seed in range(args.seeds):
-        model = fit(trainer, drives, args.steps, seed, args.window, args.batch)
+        fitted = fit(
+            trainer,
+            drives,
+            args.steps,
+            seed,
+            args.window,
+            args.batch,
+            functools.partial(validation_error, seq=held_out),
+            args.every,
+        )
+        model = fitted.model
         parameters.append(learned_parameters(model))
+        checkpoints.append({"step": fitted.step, "validation_final_pct": fitted.validation})
         for name, (_, seq) in runs.items():
             out = run_bevo(model, seq, warm_start=True)
             for segment, metrics in segments(out.increments, out.pitch_roll, seq).items():
@@ -162,6 +199,7 @@ def main() -> None:
             "zero_shot": {k: summarise(v) for k, v in zero_shot.items()},
             "keyframes_check": keyframes_check,
             "zero_shot_parameters": parameters,
+            "zero_shot_checkpoints": checkpoints,
             "seconds": time.time() - started,
             "device": jax.devices()[0].device_kind,
         },

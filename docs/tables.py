@@ -971,7 +971,8 @@ def real_kitti_keyframes_speed() -> str:
 
 
 def real_kitti_learned() -> str:
-    d = record(REAL_KITTI)["learned_parameters"]
+    rec = record(REAL_KITTI)
+    d, chosen = rec["learned_parameters"], rec["checkpoint_selection"]
     rows = []
     for run, labels in d.items():
         for label, halves in labels.items():
@@ -980,6 +981,7 @@ def real_kitti_learned() -> str:
                 rows.append(
                     [
                         f"{run}, {label}, {half}",
+                        ", ".join(str(s["step"]) for s in chosen[run][label][half]),
                         spread(v["camera_pitch_deg"], 3),
                         spread(v["camera_roll_deg"], 3),
                         spread(v["height_scale"], 3),
@@ -990,6 +992,7 @@ def real_kitti_learned() -> str:
                 )
     header = [
         "learned on",
+        "checkpoint per seed (step)",
         "camera pitch (deg)",
         "camera roll (deg)",
         "height scale",
@@ -1071,6 +1074,10 @@ def street_world_zero_shot_parameters() -> str:
     )
 
 
+def street_world_zero_shot_steps() -> str:
+    return ", ".join(str(c["step"]) for c in record(STREET_WORLD)["zero_shot_checkpoints"])
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "filtering_demo": filtering_demo,
     "ukf_speed": ukf_speed,
@@ -1141,6 +1148,7 @@ VALUES: dict[str, Callable[[], str]] = {
     "localization_wins_street": lambda: localization_wins(LOCALIZATION_STREET),
     "localization_wins": localization_wins,
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
+    "street_world_zero_shot_steps": street_world_zero_shot_steps,
     "real_kitti_keyframes_speed": real_kitti_keyframes_speed,
     "street_world_minutes": street_world_minutes,
 }
