@@ -298,6 +298,13 @@ def fit(
     return Fitted(eqx.combine(best[2], trainer.static), best[1], curve)
 
 
+def fit_held_out(trainer: Trainer, train, held_out: sq.Sequence, seed: int, args: argparse.Namespace) -> Fitted:
+    """:func:`fit` with the command line's steps, window, batch and checkpoint spacing, the
+    checkpoint chosen by :func:`validation_error` on ``held_out``."""
+    validate = functools.partial(validation_error, seq=held_out)
+    return fit(trainer, train, args.steps, seed, args.window, args.batch, validate, args.every)
+
+
 def split_training(start: int, stop: int) -> tuple[tuple[int, int], tuple[int, int]]:
     """A training half's frames ``[start, stop)`` as the frames fitted and, at its end, the
     :data:`VALIDATION_SHARE` held out to choose the checkpoint (the two share one frame, as the
@@ -478,16 +485,7 @@ def main() -> None:
                 held_out = sq.window(seq, v_start, v_stop - v_start)
                 per_seed = []
                 for seed in range(args.seeds):
-                    fitted = fit(
-                        trainer,
-                        train,
-                        args.steps,
-                        seed,
-                        args.window,
-                        args.batch,
-                        functools.partial(validation_error, seq=held_out),
-                        args.every,
-                    )
+                    fitted = fit_held_out(trainer, train, held_out, seed, args)
                     out = run_bevo(fitted.model, seq, warm_start=True)
                     per_seed.append(scores(out.increments, out.pitch_roll, seq, *half_frames(n, test_half)))
                     trained_on = f"trained on the {train_half}"

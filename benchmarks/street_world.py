@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import os
 import time
 from pathlib import Path
@@ -53,12 +52,11 @@ from real_kitti import (
     LEARNED,
     RESULTS,
     Trainer,
-    fit,
+    fit_held_out,
     learned_parameters,
     load_runs,
     segments,
     summarise,
-    validation_error,
 )
 
 #: The street world less one failure mode at a time.
@@ -171,16 +169,7 @@ def main() -> None:
     zero_shot: dict[str, list] = {}
     parameters, checkpoints = [], []
     for seed in range(args.seeds):
-        fitted = fit(
-            trainer,
-            drives,
-            args.steps,
-            seed,
-            args.window,
-            args.batch,
-            functools.partial(validation_error, seq=held_out),
-            args.every,
-        )
+        fitted = fit_held_out(trainer, drives, held_out, seed, args)
         model = fitted.model
         parameters.append(learned_parameters(model))
         checkpoints.append({"step": fitted.step, "validation_final_pct": fitted.validation})
