@@ -26,7 +26,8 @@ holds out the last third of its training half (``VALIDATION_SHARE``) and keeps, 
 starting (hand-set) parameters and every ``--every`` of its ``--steps`` Adam steps, the checkpoint
 with the lowest final error on those frames (run from their first frame's true state); no frame
 of the scored half chooses anything. ``checkpoint_selection[<run>][<variant>][trained on the
-<half>]``: per seed, the chosen ``step`` and the validation error at each checkpoint. Peers on the same frames: ``cv2.phaseCorrelate`` between the same BEV pairs as the
+<half>]``: per seed, the chosen ``step`` and the validation error at each checkpoint.
+Peers on the same frames: ``cv2.phaseCorrelate`` between the same BEV pairs as the
 hand-set street model's (translation only; the turn from the gyro, as the street model's
 fusion mostly takes it), and a monocular essential-matrix VO (ORB features,
 ``cv2.findEssentialMat`` with RANSAC, ``cv2.recoverPose``) whose unit steps get their length

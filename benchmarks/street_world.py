@@ -18,9 +18,10 @@ on street-world drives only: the first ``--frames`` frames of KITTI 00, 02, 05 a
 (simulated IMU, the street's random grade and banking; none of them is a real run scored here), ``--steps``
 Adam steps, ``--seeds`` seeds, keeping the checkpoint (among the hand-set parameters and every
 ``--every`` steps) with the lowest final error on a held-out street-world drive (00's motion after
-its training frames, ``VALIDATION_FRAMES`` of them); it is then run on the real frames. Metrics and keys as ``real_kitti.py``: ``runs[<run>][<world>][<model>][<metric>]``
-with ``<run>`` 06, 07 and their halves, and ``zero_shot[<run>][<metric>]`` (mean, std, seeds); ``zero_shot_checkpoints``: per seed, the chosen
-``step`` and the validation error at each checkpoint.
+its training frames, ``VALIDATION_FRAMES`` of them); it is then run on the real frames. Metrics
+and keys as ``real_kitti.py``: ``runs[<run>][<world>][<model>][<metric>]`` with ``<run>`` 06, 07
+and their halves, and ``zero_shot[<run>][<metric>]`` (mean, std, seeds); ``zero_shot_checkpoints``:
+per seed, the chosen ``step`` and the validation error at each checkpoint.
 
 Keyframes, held out. The preset with and without keyframes on the zero-shot drives themselves
 (street world, no real run): ``keyframes_check[<drive>][<model>][<segment>][<metric>]``, with
