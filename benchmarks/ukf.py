@@ -25,6 +25,7 @@ import sys
 import time
 from functools import partial
 from pathlib import Path
+from unittest import mock
 
 import jax
 
@@ -35,7 +36,7 @@ import numpy as np  # noqa: E402
 
 from jbevo.data.synthetic.planar import simulate_planar_sequence  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
-from jbevo.filtering import smoother, sqrt_ukf, ukf  # noqa: E402
+from jbevo.filtering import cpu_kernel, smoother, sqrt_ukf, ukf  # noqa: E402
 from jbevo.filtering.planar import planar_pose_model  # noqa: E402
 from jbevo.filtering.unscented import MerweScaled  # noqa: E402
 from jbevo.geometry import sincos, wrap_angle  # noqa: E402
@@ -107,9 +108,15 @@ def tria_lapack(a):
 def with_lapack_tria(run, *args):
     """``run`` (jitted) compiled with :func:`tria_lapack` in place of ``sqrt_ukf.tria``: traced
     once here under the patch, later calls reuse that compilation."""
-    from unittest import mock
-
     with mock.patch.object(sqrt_ukf, "tria", tria_lapack):
+        jax.block_until_ready(run(*args))
+    return run
+
+
+def with_plain_loops(run, *args):
+    """``run`` (jitted) compiled with its loops as plain XLA:CPU loops, not one kernel each
+    (:mod:`jbevo.filtering.cpu_kernel` off): traced once here, later calls reuse that compilation."""
+    with mock.patch.object(cpu_kernel, "one_kernel", lambda fn: fn):
         jax.block_until_ready(run(*args))
     return run
 
@@ -256,6 +263,17 @@ def main(argv=None) -> dict:
     }
     jb_batch_blocked = jax.jit(jax.vmap(make_jbevo(check_inputs=False, block="auto")))
     grads = {f"jbevo_grad_single{suffix}": make_grad(block) for suffix, block in (("", 1), ("_blocked", "auto"))}
+    # The same programs with plain XLA:CPU loops (each loop not compiled as one kernel).
+    single_args = (x0[0], one.increments, one.fixes)
+    plain_loops = {
+        "jbevo_single_plain_loop": with_plain_loops(jax.jit(make_jbevo(check_inputs=False)), *single_args),
+        "jbevo_sqrt_single_plain_loop": with_plain_loops(jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf)), *single_args),
+        "jbevo_smoother_single_plain_loop": with_plain_loops(
+            jax.jit(make_jbevo(check_inputs=False, smoothed=True)), *single_args
+        ),
+        "jbevo_grad_single_plain_loop": with_plain_loops(make_grad(1), *single_args),
+    }
+    jb_batch_plain = with_plain_loops(jax.jit(jax.vmap(make_jbevo(check_inputs=False))), x0, seqs.increments, seqs.fixes)
     results_compile = {
         f"compile_s_{name}": compile_seconds(fn, x0[0], one.increments, one.fixes)
         for name, fn in (
@@ -265,6 +283,9 @@ def main(argv=None) -> dict:
             ("grad_blocked", grads["jbevo_grad_single_blocked"]),
         )
     }
+    with mock.patch.object(cpu_kernel, "one_kernel", lambda fn: fn):
+        results_compile["compile_s_filter_plain_loop"] = compile_seconds(jax.jit(make_jbevo(check_inputs=False)), *single_args)
+        results_compile["compile_s_grad_plain_loop"] = compile_seconds(make_grad(1), *single_args)
 
     # dynamax updates first, then predicts step t + 1 with inputs[t + 1]: start it from jbevo's
     # first prediction, so that its filtered means are jbevo's.
@@ -301,7 +322,7 @@ def main(argv=None) -> dict:
             "jbevo_sqrt_single_lapack_qr": lambda: sqrt_lapack(x0[0], one.increments, one.fixes),
             "cuthbertlib_single": lambda: cb_single(x0[0], one.increments, fixes_unwrapped[0]),
             "cuthbertlib_uks_single": lambda: cb_uks_single(x0[0], one.increments, fixes_unwrapped[0]),
-            **{name: partial(fn, x0[0], one.increments, one.fixes) for name, fn in (blocked | grads).items()},
+            **{name: partial(fn, *single_args) for name, fn in (blocked | grads | plain_loops).items()},
         },
         "batched": {
             "jbevo_vmap64": lambda: jb_batch(x0, seqs.increments, seqs.fixes),
@@ -313,6 +334,7 @@ def main(argv=None) -> dict:
             "cuthbertlib_vmap64": lambda: cb_batch(x0, seqs.increments, fixes_unwrapped),
             "cuthbertlib_uks_vmap64": lambda: cb_uks_batch(x0, seqs.increments, fixes_unwrapped),
             "jbevo_vmap64_blocked": lambda: jb_batch_blocked(x0, seqs.increments, seqs.fixes),
+            "jbevo_vmap64_plain_loop": lambda: jb_batch_plain(x0, seqs.increments, seqs.fixes),
         },
     }
     # Independent runs of the whole measurement: this shared VM's speed varies between them.
@@ -333,6 +355,7 @@ def main(argv=None) -> dict:
         run["smoother_speedup_single_vs_dynamax_blocked"] = run["jbevo_smoother_single_blocked"] / run["dynamax_uks_single"]
         for kind in ("single", "sqrt_single", "smoother_single", "vmap64", "grad_single"):
             run[f"blocked_speedup_{kind}"] = run[f"jbevo_{kind}_blocked"] / run[f"jbevo_{kind}"]
+            run[f"one_kernel_speedup_{kind}"] = run[f"jbevo_{kind}"] / run[f"jbevo_{kind}_plain_loop"]
         runs.append(run)
     results["runs"] = runs
     results |= results_compile
@@ -376,6 +399,13 @@ def main(argv=None) -> dict:
             for a, b in zip(blocked[name](x0[0], one.increments, one.fixes), plain(x0[0], one.increments, one.fixes), strict=True)
         )
     )
+    results["max_abs_diff_one_kernel_vs_plain_loop"] = float(
+        max(
+            np.abs(np.asarray(a) - np.asarray(b)).max()
+            for ours, plain in ((jb_single, "jbevo_single_plain_loop"), (smooth_single, "jbevo_smoother_single_plain_loop"))
+            for a, b in zip(ours(*single_args), plain_loops[plain](*single_args), strict=True)
+        )
+    )
     results["speedup_single_vs_filterpy"] = results["jbevo_single"] / results["filterpy_single"]
     results["machine"] = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}"
     print_table(results)
@@ -416,6 +446,14 @@ def make_dynamax_runner(trig=lambda a: (jnp.sin(a), jnp.cos(a)), smoothed: bool 
 
 def print_table(r: dict) -> None:
     print(f"UKF, localization model, T = {r['T']}, {r['dtype']}, {r['machine']}")
+    print(
+        "each loop one XLA:CPU kernel against plain loops: "
+        + ", ".join(
+            f"{kind} {r[f'one_kernel_speedup_{kind}']:.2f}x"
+            for kind in ("single", "sqrt_single", "smoother_single", "vmap64", "grad_single")
+        )
+        + f"; max |difference| {r['max_abs_diff_one_kernel_vs_plain_loop']:.1e}"
+    )
     print(
         'block="auto" against one lax.scan: '
         + ", ".join(

@@ -1,6 +1,7 @@
 """The blocked scan: the results of ``lax.scan`` bit for bit (and its gradients), forwards and in
-reverse, with and without left-over steps; its block choice; the filters and the smoother with
-``block="auto"`` equal to their plain runs step for step."""
+reverse, with and without left-over steps (as a plain program, ``one_kernel=False``); its block
+choice; the filters and the smoother with ``block="auto"`` equal to their plain runs step for step
+(to round-off: each loop is compiled as one kernel, the two differently)."""
 
 import jax
 import jax.numpy as jnp
@@ -34,7 +35,7 @@ def inputs(steps):
 def test_equals_lax_scan_bit_for_bit(steps, block, reverse):
     init = (jnp.array([0.1, -0.2]), jnp.array(0.0))
     expected = jax.lax.scan(step, init, inputs(steps), reverse=reverse)
-    got = jax.jit(lambda i, x: blocked_scan(step, i, x, block=block, reverse=reverse))(init, inputs(steps))
+    got = jax.jit(lambda i, x: blocked_scan(step, i, x, block=block, reverse=reverse, one_kernel=False))(init, inputs(steps))
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(expected), strict=True):
         np.testing.assert_array_equal(a, b)
 
@@ -47,7 +48,7 @@ def test_gradients_equal_lax_scan(reverse):
 
     x0 = jnp.array([0.3, 0.1])
     expected = jax.grad(loss)(x0, jax.lax.scan)
-    got = jax.grad(loss)(x0, lambda *a, **k: blocked_scan(*a, block=5, **k))
+    got = jax.grad(loss)(x0, lambda *a, **k: blocked_scan(*a, block=5, one_kernel=False, **k))
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-15)
 
 
@@ -98,12 +99,11 @@ def test_filters_with_auto_blocks_equal_their_plain_runs(drive, form):
         return jax.jit(lambda p: form.filter(model, p, seq.increments, fixes, jnp.asarray(Q), jnp.asarray(R), block=block))
 
     assert loops(filtered("auto"), prior) > loops(filtered(1), prior) == 1  # the blocks are there
+    # Each loop is compiled as one kernel (jbevo.filtering.cpu_kernel), the two differently: equal
+    # to round-off, not bit for bit.
     blocked, plain = filtered("auto")(prior), filtered(1)(prior)
     for name in blocked._fields:
-        if name == "log_likelihood":  # a sum over the steps, reduced in another order
-            np.testing.assert_allclose(blocked.log_likelihood, plain.log_likelihood, rtol=1e-14)
-        else:
-            np.testing.assert_array_equal(getattr(blocked, name), getattr(plain, name), err_msg=name)
+        np.testing.assert_allclose(getattr(blocked, name), getattr(plain, name), rtol=1e-12, atol=1e-12, err_msg=name)
 
 
 @pytest.mark.parametrize("recompute", [False, True])
@@ -119,4 +119,4 @@ def test_smoother_with_auto_blocks_equals_its_plain_run(drive, recompute):
 
     assert loops(smoothed("auto"), result) > loops(smoothed(1), result) == 1
     for a, b in zip(smoothed("auto")(result), smoothed(1)(result), strict=True):
-        np.testing.assert_array_equal(a, b)
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)

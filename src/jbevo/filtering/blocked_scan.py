@@ -21,6 +21,11 @@ smoother of one sequence run faster; under ``vmap`` the batch makes every buffer
 the blocks only add work, and so do gradients, whose stored residuals are large (and which take
 longer to compile). The filters therefore take ``block=1`` (one ``lax.scan``) by default and
 ``"auto"`` on request.
+
+Either way, :func:`blocked_scan` compiles its loops as one XLA:CPU kernel where the step allows
+(:func:`jbevo.filtering.cpu_kernel.one_kernel`; ``one_kernel=False`` keeps plain loops): no
+kernels are called per step at all, which removes the cost the blocks work around and is faster
+than them (docs/filtering.md).
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ from typing import Any, Literal, TypeVar
 
 import jax
 import jax.numpy as jnp
+
+from jbevo.filtering import cpu_kernel
 
 Carry = TypeVar("Carry")
 
@@ -79,12 +86,14 @@ def blocked_scan(
     block: int | Literal["auto"] = "auto",
     reverse: bool = False,
     unroll: int = 1,
+    one_kernel: bool = True,
 ) -> tuple[Carry, Any]:
     """``jax.lax.scan(f, init, xs, reverse=reverse, unroll=unroll)``, run as blocks of ``block``
     steps (``"auto"``: :func:`block_size`; 1 is a plain scan). Steps that do not fill a last
     block run as a plain scan after the blocks (before them in reverse). ``unroll`` applies to
     the scans over steps. ``xs`` must have at least one leaf (the filters always scan over
-    inputs)."""
+    inputs). With ``one_kernel`` the loops are compiled as one XLA:CPU kernel where the step
+    allows (:func:`jbevo.filtering.cpu_kernel.one_kernel`): the same results to round-off."""
     leaves = jax.tree.leaves(xs)
     if not leaves:
         raise ValueError("blocked_scan needs inputs xs with a leading axis")
@@ -94,6 +103,14 @@ def blocked_scan(
     if not isinstance(block, int) or isinstance(block, bool) or block < 1:
         raise ValueError(f'block must be a positive int or "auto", got {block!r}')
     block = min(block, max(length, 1))
+    if not one_kernel:
+        return _scan_in_blocks(f, init, xs, block, reverse, unroll)
+    return cpu_kernel.one_kernel(lambda c, x: _scan_in_blocks(f, c, x, block, reverse, unroll))(init, xs)
+
+
+def _scan_in_blocks(f, init, xs, block: int, reverse: bool, unroll: int):
+    """:func:`blocked_scan`'s loops, ``block`` checked."""
+    length = jax.tree.leaves(xs)[0].shape[0]
     if block == 1:
         return jax.lax.scan(f, init, xs, reverse=reverse, unroll=unroll)
     blocks = length // block

@@ -1,0 +1,155 @@
+"""One XLA:CPU kernel per loop: which functions it takes (and which it leaves alone), that the
+compiled program really holds the one-function call, and that results, batches and gradients are
+those of the plain program to round-off."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jbevo.filtering import cpu_kernel, ukf
+from jbevo.filtering.cpu_kernel import compiles_as_one_kernel, one_kernel, primitives
+from jbevo.filtering.planar import planar_pose_model
+from tests.filtering.references import P0, Q, R
+
+pytestmark = pytest.mark.usefixtures("float64")
+
+ON_CPU = jax.default_backend() == "cpu"
+
+
+def loop(carry, xs):
+    """A nonlinear recursion with a pytree carry (the kind of loop a filter is)."""
+
+    def step(c, u):
+        x, total = c
+        x = jnp.tanh(jnp.array([0.9, 0.8]) * x + jnp.array([0.2, -0.3]) * x[::-1] + u)
+        return (x, total + jnp.sum(jnp.sin(x))), x
+
+    return jax.lax.scan(step, carry, xs)
+
+
+def args():
+    return (jnp.array([0.1, -0.2]), jnp.array(0.0)), jax.random.normal(jax.random.PRNGKey(0), (50, 2))
+
+
+def small_calls(fn, *a) -> int:
+    """How many one-function calls the compiled program of ``fn(*a)`` holds."""
+    return jax.jit(fn).lower(*a).compile().as_text().count('xla_cpu_small_call="true"')
+
+
+def test_primitives_include_nested_jaxprs():
+    def f(x):
+        return jax.lax.cond(x[0] > 0, lambda y: jax.lax.scan(lambda c, v: (c * v, c), 1.0, y)[1], jnp.cos, x)
+
+    names = primitives(jax.make_jaxpr(f)(jnp.ones(3)).jaxpr)
+    assert {"cond", "scan", "mul", "cos"} <= names
+
+
+def test_takes_elementwise_loops_and_leaves_library_calls_alone():
+    carry, xs = args()
+    assert compiles_as_one_kernel(loop, carry, xs)
+    # LAPACK, FFT, sort, gather (whose transpose is a scatter) and matrix products are not
+    # one-function code.
+    assert not compiles_as_one_kernel(lambda a: jnp.linalg.cholesky(a @ a.T + jnp.eye(3)), jnp.eye(3))
+    assert not compiles_as_one_kernel(lambda a: jnp.fft.fft(a).real, jnp.ones(8))
+    assert not compiles_as_one_kernel(jnp.sort, jnp.ones(8))
+    assert not compiles_as_one_kernel(lambda a, i: a[i], jnp.ones(8), jnp.array([1, 3]))
+    assert not compiles_as_one_kernel(lambda a: jax.pure_callback(np.sin, a, a), jnp.ones(2))
+    assert not compiles_as_one_kernel(lambda a: a @ a, jnp.ones((4, 4)))
+
+
+@pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
+def test_compiled_program_holds_the_call_only_where_taken():
+    carry, xs = args()
+    assert small_calls(one_kernel(loop), carry, xs) >= 1
+
+    # A loop with a LAPACK call runs as it is, and runs.
+    def with_lapack(a):
+        return jax.lax.scan(lambda c, _: (jnp.linalg.cholesky(c @ c.T + jnp.eye(2)), c[0, 0]), a, jnp.arange(3.0))
+
+    assert small_calls(one_kernel(with_lapack), jnp.eye(2)) == 0
+    np.testing.assert_allclose(jax.jit(one_kernel(with_lapack))(jnp.eye(2))[1], with_lapack(jnp.eye(2))[1])
+
+
+def test_equals_plain_program_batched_and_differentiated():
+    carry, xs = args()
+    fused = jax.jit(one_kernel(loop))
+    for a, b in zip(jax.tree.leaves(fused(carry, xs)), jax.tree.leaves(jax.jit(loop)(carry, xs)), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)
+
+    batch = jax.random.normal(jax.random.PRNGKey(1), (4, 50, 2))
+    got = jax.jit(jax.vmap(one_kernel(loop), in_axes=(None, 0)))(carry, batch)
+    want = jax.vmap(loop, in_axes=(None, 0))(carry, batch)
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-13, atol=1e-13)
+
+    def total(x0, fn):
+        return fn((x0, jnp.array(0.0)), xs)[0][1]
+
+    grad = jax.jit(jax.grad(lambda x0: total(x0, one_kernel(loop))))(carry[0])
+    np.testing.assert_allclose(grad, jax.grad(lambda x0: total(x0, loop))(carry[0]), rtol=1e-12)
+    eps = 1e-6
+    fd = [(total(carry[0].at[i].add(eps), loop) - total(carry[0].at[i].add(-eps), loop)) / (2 * eps) for i in range(2)]
+    np.testing.assert_allclose(grad, fd, rtol=1e-6)
+
+
+@pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
+def test_localization_ukf_and_its_gradient_compile_as_one_kernel():
+    """The filters take it through their scans: the UKF and its gradient with respect to Q hold the
+    call, and equal the same filter with the plain loop."""
+    model = planar_pose_model()
+    steps = 2000  # too large for XLA:CPU to make the plain loop one function by itself
+    u = jnp.tile(jnp.array([0.5, 0.0, 0.02]), (steps, 1))
+    z = jnp.cumsum(u, axis=0) + 0.1
+
+    def ll(q_scale):
+        prior = ukf.GaussianState(jnp.zeros(3), jnp.asarray(P0))
+        return ukf.filter(model, prior, u, z, q_scale * jnp.asarray(Q), jnp.asarray(R), check_inputs=False).log_likelihood
+
+    assert small_calls(ll, 1.0) >= 1
+    assert small_calls(jax.grad(ll), 1.0) >= 1
+    fused = jax.jit(jax.value_and_grad(ll))(1.3)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(cpu_kernel, "one_kernel", lambda fn: fn)
+        assert small_calls(lambda q: ll(q), 1.0) == 0
+        plain = jax.jit(jax.value_and_grad(lambda q: ll(q)))(1.3)
+    np.testing.assert_allclose(fused, plain, rtol=1e-12)
+
+
+@pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
+def test_constant_operands_compile():
+    """Operands that XLA knows at compile time (trace-time arrays, data computed inside ``jit``
+    from constants alone, a large captured table): without the barrier in front of the call, such
+    an operand of 10 kB or more makes XLA abort the process."""
+    steps = 2000
+    model = planar_pose_model()
+    prior = ukf.GaussianState(jnp.zeros(3), jnp.asarray(P0))
+
+    def ll(q_scale, u, z):
+        return ukf.filter(model, prior, u, z, q_scale * jnp.asarray(Q), jnp.asarray(R), check_inputs=False).log_likelihood
+
+    u_known = jnp.tile(jnp.array([0.5, 0.0, 0.02]), (steps, 1))
+    z_known = jnp.cumsum(u_known, axis=0) + 0.1
+    from_args = jax.jit(ll)(1.0, u_known, z_known)
+
+    def folded(q_scale):
+        u = jnp.tile(jnp.array([0.5, 0.0, 0.02]), (steps, 1))
+        return ll(q_scale, u, jnp.cumsum(u, axis=0) + 0.1)
+
+    np.testing.assert_allclose(jax.jit(folded)(1.0), from_args, rtol=1e-12)
+    np.testing.assert_allclose(jax.jit(lambda q: ll(q, u_known, z_known))(1.0), from_args, rtol=1e-12)
+    np.testing.assert_allclose(jax.jit(jax.grad(folded))(1.0), jax.grad(lambda q: ll(q, u_known, z_known))(1.0), rtol=1e-10)
+
+    table = np.linspace(0.0, 1.0, 4000).reshape(1000, 4)  # 32 kB, read a row per step
+
+    def with_table(carry, xs):
+        def step(c, x):
+            value, t = c
+            row = jax.lax.dynamic_slice(jnp.asarray(table), (t % 1000, 0), (1, 3))[0]
+            return (0.9 * value + x + row, t + 1), value
+
+        return jax.lax.scan(step, carry, xs)
+
+    start, xs = (jnp.zeros(3), jnp.array(0)), jnp.ones((3000, 3))
+    assert small_calls(one_kernel(with_table), start, xs) >= 1
+    np.testing.assert_allclose(jax.jit(one_kernel(with_table))(start, xs)[1], with_table(start, xs)[1], rtol=1e-13)
