@@ -36,7 +36,7 @@ import numpy as np  # noqa: E402
 
 from jbevo.data.synthetic.planar import simulate_planar_sequence  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
-from jbevo.filtering import cpu_kernel, smoother, sqrt_ukf, ukf  # noqa: E402
+from jbevo.filtering import smoother, sqrt_ukf, ukf  # noqa: E402
 from jbevo.filtering.planar import planar_pose_model  # noqa: E402
 from jbevo.filtering.unscented import MerweScaled  # noqa: E402
 from jbevo.geometry import sincos, wrap_angle  # noqa: E402
@@ -51,7 +51,7 @@ P0 = np.diag([1.0, 1.0, 0.1]) ** 2
 # --------------------------------------------------------------------------------- jbevo
 
 
-def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1):
+def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1, one_kernel: bool = True):
     """jbevo's filter (``form``: :mod:`ukf` or :mod:`sqrt_ukf`), optionally followed by the RTS
     smoother, its loops in blocks of ``block`` steps (1: one ``lax.scan``, ``"auto"``):
     ``run(x0, increments, fixes) -> (means, covariances or factors)``."""
@@ -69,16 +69,17 @@ def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1):
             scheme=scheme,
             check_inputs=check_inputs,
             block=block,
+            one_kernel=one_kernel,
         )
         if smoothed:
-            sm = smoother.smooth(model, res, increments, jnp.asarray(Q), scheme=scheme, block=block)
+            sm = smoother.smooth(model, res, increments, jnp.asarray(Q), scheme=scheme, block=block, one_kernel=one_kernel)
             return sm.smoothed_mean, sm.smoothed_cov
         return res[0], res[1]
 
     return run
 
 
-def make_grad(block):
+def make_grad(block, one_kernel: bool = True):
     """The gradient of the covariance filter's log-likelihood with respect to the initial mean
     (the cost of learning through the filter), its loop in blocks of ``block`` steps."""
     model = planar_pose_model()
@@ -86,10 +87,17 @@ def make_grad(block):
 
     def log_likelihood(x0, increments, fixes):
         prior = ukf.GaussianState(x0, jnp.asarray(P0))
-        res = ukf.filter(model, prior, increments, fixes, jnp.asarray(Q), jnp.asarray(R), scheme=scheme, block=block)
+        res = ukf.filter(
+            model, prior, increments, fixes, jnp.asarray(Q), jnp.asarray(R), scheme=scheme, block=block, one_kernel=one_kernel
+        )
         return res.log_likelihood
 
     return jax.jit(jax.grad(log_likelihood))
+
+
+def small_calls(fn, *args) -> int:
+    """How many one-kernel calls the jitted ``fn``'s compiled program for ``args`` holds."""
+    return fn.lower(*args).compile().as_text().count('xla_cpu_small_call="true"')
 
 
 def compile_seconds(fn, *args) -> float:
@@ -106,19 +114,18 @@ def tria_lapack(a):
 
 
 def with_lapack_tria(run, *args):
-    """``run`` (jitted) compiled with :func:`tria_lapack` in place of ``sqrt_ukf.tria``: traced
-    once here under the patch, later calls reuse that compilation."""
+    """``run`` jitted with :func:`tria_lapack` in place of ``sqrt_ukf.tria``: traced once here
+    under the patch, later calls reuse that compilation. It is jitted as a function of its own
+    code: ``jax.jit`` reuses a trace for another function of the same code and closure, which
+    would give the patched program to the plain one or the other way round."""
+
+    def lapack_tria_run(*a):
+        return run(*a)
+
+    jitted = jax.jit(lapack_tria_run)
     with mock.patch.object(sqrt_ukf, "tria", tria_lapack):
-        jax.block_until_ready(run(*args))
-    return run
-
-
-def with_plain_loops(run, *args):
-    """``run`` (jitted) compiled with its loops as plain XLA:CPU loops, not one kernel each
-    (:mod:`jbevo.filtering.cpu_kernel` off): traced once here, later calls reuse that compilation."""
-    with mock.patch.object(cpu_kernel, "one_kernel", lambda fn: fn):
-        jax.block_until_ready(run(*args))
-    return run
+        jax.block_until_ready(jitted(*args))
+    return jitted
 
 
 # --------------------------------------------------------------------------- cuthbertlib
@@ -253,7 +260,7 @@ def main(argv=None) -> dict:
     sqrt_batch = jax.jit(jax.vmap(make_jbevo(check_inputs=False, form=sqrt_ukf)))
     smooth_single = jax.jit(make_jbevo(check_inputs=False, smoothed=True))
     smooth_batch = jax.jit(jax.vmap(make_jbevo(check_inputs=False, smoothed=True)))
-    sqrt_lapack = with_lapack_tria(jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf)), x0[0], one.increments, one.fixes)
+    sqrt_lapack = with_lapack_tria(make_jbevo(check_inputs=False, form=sqrt_ukf), x0[0], one.increments, one.fixes)
     # The loops in blocks whose buffers stay small (``block="auto"``), and gradients of the
     # log-likelihood with respect to the initial mean, with and without blocks.
     blocked = {
@@ -266,14 +273,12 @@ def main(argv=None) -> dict:
     # The same programs with plain XLA:CPU loops (each loop not compiled as one kernel).
     single_args = (x0[0], one.increments, one.fixes)
     plain_loops = {
-        "jbevo_single_plain_loop": with_plain_loops(jax.jit(make_jbevo(check_inputs=False)), *single_args),
-        "jbevo_sqrt_single_plain_loop": with_plain_loops(jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf)), *single_args),
-        "jbevo_smoother_single_plain_loop": with_plain_loops(
-            jax.jit(make_jbevo(check_inputs=False, smoothed=True)), *single_args
-        ),
-        "jbevo_grad_single_plain_loop": with_plain_loops(make_grad(1), *single_args),
+        "jbevo_single_plain_loop": jax.jit(make_jbevo(check_inputs=False, one_kernel=False)),
+        "jbevo_sqrt_single_plain_loop": jax.jit(make_jbevo(check_inputs=False, form=sqrt_ukf, one_kernel=False)),
+        "jbevo_smoother_single_plain_loop": jax.jit(make_jbevo(check_inputs=False, smoothed=True, one_kernel=False)),
+        "jbevo_grad_single_plain_loop": make_grad(1, one_kernel=False),
     }
-    jb_batch_plain = with_plain_loops(jax.jit(jax.vmap(make_jbevo(check_inputs=False))), x0, seqs.increments, seqs.fixes)
+    jb_batch_plain = jax.jit(jax.vmap(make_jbevo(check_inputs=False, one_kernel=False)))
     results_compile = {
         f"compile_s_{name}": compile_seconds(fn, x0[0], one.increments, one.fixes)
         for name, fn in (
@@ -283,9 +288,12 @@ def main(argv=None) -> dict:
             ("grad_blocked", grads["jbevo_grad_single_blocked"]),
         )
     }
-    with mock.patch.object(cpu_kernel, "one_kernel", lambda fn: fn):
-        results_compile["compile_s_filter_plain_loop"] = compile_seconds(jax.jit(make_jbevo(check_inputs=False)), *single_args)
-        results_compile["compile_s_grad_plain_loop"] = compile_seconds(make_grad(1), *single_args)
+    results_compile["compile_s_filter_plain_loop"] = compile_seconds(plain_loops["jbevo_single_plain_loop"], *single_args)
+    results_compile["compile_s_grad_plain_loop"] = compile_seconds(plain_loops["jbevo_grad_single_plain_loop"], *single_args)
+    # Each loop is one kernel by default, and a plain loop with one_kernel=False or LAPACK's QR.
+    if jax.default_backend() == "cpu":
+        assert small_calls(jb_single, *single_args) > 0 and small_calls(sqrt_single, *single_args) > 0
+        assert small_calls(plain_loops["jbevo_single_plain_loop"], *single_args) == small_calls(sqrt_lapack, *single_args) == 0
 
     # dynamax updates first, then predicts step t + 1 with inputs[t + 1]: start it from jbevo's
     # first prediction, so that its filtered means are jbevo's.

@@ -162,6 +162,20 @@ def solve(a: Float[ArrayLike, "... n n"], b: Float[ArrayLike, "... n k"]) -> Flo
     return solve_upper_transposed(jnp.swapaxes(upper, -1, -2), rhs)
 
 
+def matmul(a: Float[ArrayLike, "... n k"], b: Float[ArrayLike, "... k m"]) -> Float[Array, "... n m"]:
+    """``a @ b`` as a product and a sum over ``k`` (a reduction, no dot): for the few-number
+    products of a filter step, which then stay elementwise code that the step's loop can compile
+    as one XLA:CPU kernel (:mod:`jbevo.filtering.cpu_kernel`, which takes no dot)."""
+    a, b = jnp.asarray(a), jnp.asarray(b)
+    return jnp.sum(a[..., :, :, None] * b[..., None, :, :], axis=-2)
+
+
+def matvec(a: Float[ArrayLike, "... n k"], x: Float[ArrayLike, "... k"]) -> Float[Array, "... n"]:
+    """``a @ x`` for a vector ``x``, as :func:`matmul` does it."""
+    a, x = jnp.asarray(a), jnp.asarray(x)
+    return jnp.sum(a * x[..., None, :], axis=-1)
+
+
 def logdet_from_cholesky(low: Float[ArrayLike, "... n n"]) -> Float[Array, "..."]:
     """``log det(low @ low^T)`` from the lower Cholesky factor."""
     low = jnp.asarray(low)
@@ -192,6 +206,8 @@ __all__ = [
     "cholesky",
     "is_positive_definite",
     "logdet_from_cholesky",
+    "matmul",
+    "matvec",
     "solve_lower",
     "solve_upper_transposed",
     "symmetrize",

@@ -56,6 +56,7 @@ def smooth(
     *,
     scheme: Scheme = MerweScaled(),
     block: int | Literal["auto"] = 1,
+    one_kernel: bool = True,
 ) -> SmootherResult:
     """The unscented RTS smoother (module docstring) over ``result``, the output of
     :func:`jbevo.filtering.ukf.filter` run with the same ``model``, ``controls``, ``motion_cov``
@@ -68,10 +69,19 @@ def smooth(
     shapes and ``scheme`` and the model's motion are not used (the filter's own were); to smooth
     with others, pass ``result._replace(smoother_gains=None)``, which recomputes everything with
     them. The filter's gain into step ``k + 1`` is the smoother's gain from step ``k``:
-    ``gains[k] == result.smoother_gains[k + 1]``. ``block`` as in
-    :func:`jbevo.filtering.ukf.filter` (the backward loop in blocks; the same results)."""
+    ``gains[k] == result.smoother_gains[k + 1]``. ``block`` and ``one_kernel`` as in
+    :func:`jbevo.filtering.ukf.filter` (the backward loop in blocks, as one kernel)."""
     if result.smoother_gains is None:
-        return smooth_beliefs(model, result.filtered_mean, result.filtered_cov, controls, motion_cov, scheme=scheme, block=block)
+        return smooth_beliefs(
+            model,
+            result.filtered_mean,
+            result.filtered_cov,
+            controls,
+            motion_cov,
+            scheme=scheme,
+            block=block,
+            one_kernel=one_kernel,
+        )
     means, covs = result.filtered_mean, result.filtered_cov
     steps, _ = _checked_inputs(means, covs, controls, motion_cov)
     fields = {"predicted_mean": means.shape, "predicted_cov": covs.shape, "smoother_gains": covs.shape}
@@ -91,7 +101,7 @@ def smooth(
         return _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted_cov, gain)
 
     inputs = (means[:-1], covs[:-1], result.predicted_mean[1:], result.predicted_cov[1:], result.smoother_gains[1:])
-    _, (sm, sc, gains) = blocked_scan(back, (means[-1], covs[-1]), inputs, reverse=True, block=block)
+    _, (sm, sc, gains) = blocked_scan(back, (means[-1], covs[-1]), inputs, reverse=True, block=block, one_kernel=one_kernel)
     return _with_last(sm, sc, gains, means, covs)
 
 
@@ -117,9 +127,9 @@ def _rts_step(model, mean, cov, later_mean, later_cov, predicted_mean, predicted
         innovation = later_mean - predicted_mean
     else:
         innovation = model.state_residual(later_mean, predicted_mean)
-    correction = gain @ innovation
+    correction = linalg.matvec(gain, innovation)
     new_mean = mean + correction if model.state_add is None else model.state_add(mean, correction)
-    new_cov = linalg.symmetrize(cov + gain @ (later_cov - predicted_cov) @ gain.T)
+    new_cov = linalg.symmetrize(cov + linalg.matmul(linalg.matmul(gain, later_cov - predicted_cov), gain.T))
     return (new_mean, new_cov), (new_mean, new_cov, gain)
 
 
@@ -139,10 +149,12 @@ def smooth_beliefs(
     *,
     scheme: Scheme = MerweScaled(),
     block: int | Literal["auto"] = 1,
+    one_kernel: bool = True,
 ) -> SmootherResult:
     """:func:`smooth` over filtered beliefs given as arrays (``means[t]``, ``covs[t]``: the belief
     after step ``t``'s motion with ``controls[t]`` and its updates), for filters that are not one
-    :func:`jbevo.filtering.ukf.filter` call (several updates per step, robust or linear ones)."""
+    :func:`jbevo.filtering.ukf.filter` call (several updates per step, robust or linear ones);
+    ``block`` and ``one_kernel`` as there."""
     steps, q_seq = _checked_inputs(means, covs, controls, motion_cov)
     if steps == 1:
         return SmootherResult(means, covs, jnp.zeros_like(covs))
@@ -162,7 +174,12 @@ def smooth_beliefs(
 
     later_controls = jax.tree.map(lambda a: a[1:], controls)
     _, (sm, sc, gains) = blocked_scan(
-        back, (means[-1], covs[-1]), (means[:-1], covs[:-1], later_controls, q_seq[1:]), reverse=True, block=block
+        back,
+        (means[-1], covs[-1]),
+        (means[:-1], covs[:-1], later_controls, q_seq[1:]),
+        reverse=True,
+        block=block,
+        one_kernel=one_kernel,
     )
     return _with_last(sm, sc, gains, means, covs)
 

@@ -201,10 +201,10 @@ def update(
     )
     s_chol, whitened_gain_t, new_chol = joint[:m, :m], joint[m:, :m], joint[m:, m:]
     e = linalg.solve_lower(s_chol, innovation[:, None])[:, 0]
-    correction = whitened_gain_t @ e
+    correction = linalg.matvec(whitened_gain_t, e)
     new_mean = correction + mean if model.state_add is None else model.state_add(mean, correction)
     logdet = linalg.logdet_from_cholesky(s_chol)
-    log_lik = -0.5 * (e @ e + logdet + jnp.sum(observed).astype(mean.dtype) * _LOG_2PI)
+    log_lik = -0.5 * (jnp.sum(e * e) + logdet + jnp.sum(observed).astype(mean.dtype) * _LOG_2PI)
     return SqrtGaussianState(new_mean, new_chol), log_lik
 
 
@@ -222,10 +222,11 @@ def filter(
     unroll: int = 1,
     measurement_inputs: Any = None,
     block: int | Literal["auto"] = 1,
+    one_kernel: bool = True,
 ) -> SqrtFilterResult:
     """Run the square-root UKF over a sequence with ``jax.lax.scan``: the arguments and their
     checks as :func:`jbevo.filtering.ukf.filter` (Q and R as covariances, factored once, or per
-    step if they have a time axis; ``block`` as there); ``initial`` as a factor or as a
+    step if they have a time axis; ``block`` and ``one_kernel`` as there); ``initial`` as a factor or as a
     covariance."""
     if isinstance(initial, SqrtGaussianState):
         initial = initial.to_gaussian()
@@ -244,7 +245,12 @@ def filter(
         return filtered, (filtered, predicted, ll)
 
     _, (filtered, predicted, lls) = blocked_scan(
-        body, start, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), block=block, unroll=unroll
+        body,
+        start,
+        (controls, measurements, mask, q_seq, r_seq, measurement_inputs),
+        block=block,
+        unroll=unroll,
+        one_kernel=one_kernel,
     )
     return SqrtFilterResult(filtered.mean, filtered.chol, predicted.mean, predicted.chol, lls, jnp.sum(lls))
 

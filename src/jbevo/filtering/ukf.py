@@ -231,6 +231,7 @@ def filter(
     unroll: int = 1,
     measurement_inputs: Any = None,
     block: int | Literal["auto"] = 1,
+    one_kernel: bool = True,
 ) -> FilterResult:
     """Run the UKF over a sequence with ``jax.lax.scan``.
 
@@ -246,7 +247,9 @@ def filter(
     blocks of that many steps (:func:`jbevo.filtering.blocked_scan.blocked_scan`; the same
     results): ``"auto"`` makes a forward run of one sequence of a small model faster on the CPU
     (docs/filtering.md); keep 1 (one ``lax.scan``) under ``vmap`` or differentiation, where it
-    is slower.
+    is slower. ``one_kernel`` compiles the loop as one XLA:CPU kernel where the model allows
+    (:func:`jbevo.filtering.cpu_kernel.one_kernel`; the same results to round-off, faster);
+    ``False`` keeps XLA's plain loop.
     """
     initial, controls, measurements, motion_cov, measurement_cov, mask = _sequence_inputs(
         model, initial, controls, measurements, motion_cov, measurement_cov, mask, check_inputs, measurement_inputs
@@ -259,7 +262,12 @@ def filter(
         return _step(model, scheme, q_const, r_const, state, inputs)
 
     _, (filtered, predicted, lls, gains) = blocked_scan(
-        body, initial, (controls, measurements, mask, q_seq, r_seq, measurement_inputs), block=block, unroll=unroll
+        body,
+        initial,
+        (controls, measurements, mask, q_seq, r_seq, measurement_inputs),
+        block=block,
+        unroll=unroll,
+        one_kernel=one_kernel,
     )
     return FilterResult(filtered.mean, filtered.cov, predicted.mean, predicted.cov, lls, jnp.sum(lls), gains)
 
