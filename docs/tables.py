@@ -123,8 +123,10 @@ def ukf_forms() -> str:
     return table([f"method ({len(runs)} runs)", "steps/s, median (range)", "speed relative to"], rows)
 
 
-def ukf_blocked() -> str:
-    d = record("benchmarks/results/ukf.json")
+def ukf_loop_variants(d: dict, before: str, after: str, speedup: str) -> list[list[str]]:
+    """Rows of the filters' loops compiled two ways (``ukf.json``): per program, the median
+    steps/s of the keys ``jbevo_<kind><before>`` and ``jbevo_<kind><after>``, and the median
+    (range) over the runs of ``<speedup>_<kind>``."""
     runs = d["runs"]
     rows = []
     for kind, label in [
@@ -134,9 +136,16 @@ def ukf_blocked() -> str:
         ("vmap64", f"UKF, vmap over {d['batch']}"),
         ("grad_single", "gradient of the UKF's log-likelihood, one sequence"),
     ]:
-        plain, blocked = (np.median([r[f"jbevo_{kind}{suffix}"] for r in runs]) for suffix in ("", "_blocked"))
-        ratio = [r[f"blocked_speedup_{kind}"] for r in runs]
-        rows.append([label, f"{plain:,.0f}", f"{blocked:,.0f}", f"{np.median(ratio):.2f} ({min(ratio):.2f} - {max(ratio):.2f})"])
+        first, second = (np.median([r[f"jbevo_{kind}{suffix}"] for r in runs]) for suffix in (before, after))
+        ratio = [r[f"{speedup}_{kind}"] for r in runs]
+        rows.append([label, f"{first:,.0f}", f"{second:,.0f}", f"{np.median(ratio):.2f} ({min(ratio):.2f} - {max(ratio):.2f})"])
+    return rows
+
+
+def ukf_blocked() -> str:
+    d = record("benchmarks/results/ukf.json")
+    runs = d["runs"]
+    rows = ukf_loop_variants(d, "", "_blocked", "blocked_speedup")
     for key, label in [
         ("speedup_single_vs_dynamax_blocked", "blocked UKF, one sequence, against dynamax's UKF"),
         ("smoother_speedup_single_vs_dynamax_blocked", "blocked UKF + RTS smoother, one sequence, against dynamax's UKS"),
@@ -150,19 +159,9 @@ def ukf_blocked() -> str:
 
 def ukf_one_kernel() -> str:
     d = record("benchmarks/results/ukf.json")
-    runs = d["runs"]
-    rows = []
-    for kind, label in [
-        ("single", "UKF, one sequence"),
-        ("sqrt_single", "square-root UKF, one sequence"),
-        ("smoother_single", "UKF + RTS smoother, one sequence"),
-        ("vmap64", f"UKF, vmap over {d['batch']}"),
-        ("grad_single", "gradient of the UKF's log-likelihood, one sequence"),
-    ]:
-        plain, fused = (np.median([r[f"jbevo_{kind}{suffix}"] for r in runs]) for suffix in ("_plain_loop", ""))
-        ratio = [r[f"one_kernel_speedup_{kind}"] for r in runs]
-        rows.append([label, f"{plain:,.0f}", f"{fused:,.0f}", f"{np.median(ratio):.2f} ({min(ratio):.2f} - {max(ratio):.2f})"])
-    return table([f"method ({len(runs)} runs)", "plain loop (steps/s)", "one kernel (steps/s)", "speed-up, median (range)"], rows)
+    rows = ukf_loop_variants(d, "_plain_loop", "", "one_kernel_speedup")
+    header = [f"method ({len(d['runs'])} runs)", "plain loop (steps/s)", "one kernel (steps/s)", "speed-up, median (range)"]
+    return table(header, rows)
 
 
 def ukf_compile() -> str:
