@@ -8,7 +8,9 @@ of ``--repeats``), each jitted:
 * ``ipls_sequential`` / ``ipls_parallel``: one iteration of the iterated posterior-linearisation
   smoother (sigma-point linearisation, then the affine filter and smoother by ``lax.scan`` or by
   ``associative_scan``), from the same linearisation points;
-* ``affine_sequential`` / ``affine_parallel``: the affine Kalman filter and RTS smoother alone.
+* ``affine_sequential`` / ``affine_parallel``: the affine Kalman filter and RTS smoother alone;
+  ``affine_sequential_plain_loop``: the sequential ones with XLA's plain loops instead of one
+  kernel per loop (``one_kernel=False``), the per-step overhead that the parallel form avoids.
 
 Also recorded: the largest difference between the parallel and sequential results, the number
 of iterations to convergence from the unscented smoother's points, and the distance of the
@@ -87,7 +89,13 @@ def measure(steps: int, repeats: int) -> dict:
     ipls_seq, ipls_par = ipls(False), ipls(True)
     affine = jax.jit(lambda c, z, p: pl.linearised_model(model, p, c, z, q_seq, r_seq))(controls, fixes, points)
     prior = ukf.GaussianState(initial.mean, initial.cov)
-    affine_seq = jax.jit(lambda m: parallel.sequential_smoother(m, parallel.sequential_filter(m, prior)).mean)
+
+    def affine_sequential(m, one_kernel=True):
+        filtered = parallel.sequential_filter(m, prior, one_kernel=one_kernel)
+        return parallel.sequential_smoother(m, filtered, one_kernel=one_kernel).mean
+
+    affine_seq = jax.jit(affine_sequential)
+    affine_seq_plain = jax.jit(lambda m: affine_sequential(m, one_kernel=False))
     affine_par = jax.jit(lambda m: parallel.smooth(m, parallel.filter(m, prior)).mean)
 
     seconds = best_seconds_interleaved(
@@ -96,6 +104,7 @@ def measure(steps: int, repeats: int) -> dict:
             "ipls_sequential": lambda: ipls_seq(controls, fixes, points).smoothed_mean,
             "ipls_parallel": lambda: ipls_par(controls, fixes, points).smoothed_mean,
             "affine_sequential": lambda: affine_seq(affine),
+            "affine_sequential_plain_loop": lambda: affine_seq_plain(affine),
             "affine_parallel": lambda: affine_par(affine),
         },
         repeats,
@@ -109,6 +118,7 @@ def measure(steps: int, repeats: int) -> dict:
         "parallel_over_sequential": {
             "ipls_iteration": seconds["ipls_parallel"] / seconds["ipls_sequential"],
             "affine_filter_smoother": seconds["affine_parallel"] / seconds["affine_sequential"],
+            "affine_filter_smoother_plain_loop": seconds["affine_parallel"] / seconds["affine_sequential_plain_loop"],
         },
         "max_abs_diff_parallel_vs_sequential": {
             "smoothed_mean": state_difference(a.smoothed_mean, b.smoothed_mean),

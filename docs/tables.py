@@ -205,6 +205,7 @@ def parallel_in_time() -> str:
                 f"{s['ipls_parallel'] * 1e3:,.1f}",
                 f"{r['parallel_over_sequential']['ipls_iteration']:.2f}",
                 f"{r['parallel_over_sequential']['affine_filter_smoother']:.2f}",
+                f"{r['parallel_over_sequential']['affine_filter_smoother_plain_loop']:.2f}",
                 f"{r['max_abs_diff_parallel_vs_sequential']['smoothed_mean']:.0e}",
                 str(r["iterations_to_converge"]),
             ]
@@ -217,6 +218,7 @@ def parallel_in_time() -> str:
             "IPLS iteration, parallel (ms)",
             "parallel / sequential",
             "affine filter + smoother alone, parallel / sequential",
+            "the same, parallel / sequential as plain loops",
             "max |parallel - sequential|",
             "iterations to 1e-9",
         ],

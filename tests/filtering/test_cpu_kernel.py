@@ -7,10 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jbevo.filtering import ukf
+from jbevo.filtering import parallel, ukf
 from jbevo.filtering.cpu_kernel import compiles_as_one_kernel, one_kernel, primitives
 from jbevo.filtering.planar import planar_pose_model
 from tests.filtering.references import P0, Q, R
+from tests.filtering.test_parallel import random_model
 
 pytestmark = pytest.mark.usefixtures("float64")
 
@@ -112,6 +113,25 @@ def test_localization_ukf_and_its_gradient_compile_as_one_kernel():
     fused = jax.jit(jax.value_and_grad(ll))(1.3)
     assert small_calls(lambda q: ll(q, one_kernel=False), 1.0) == 0
     plain = jax.jit(jax.value_and_grad(lambda q: ll(q, one_kernel=False)))(1.3)
+    np.testing.assert_allclose(fused, plain, rtol=1e-12)
+
+
+@pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
+def test_affine_sequential_filter_and_smoother_compile_as_one_kernel():
+    """The Kalman filter and RTS smoother of the IPLS's sequential pass hold the call, with and
+    without missing data, and equal their plain loops and the gradient through them."""
+    model, prior = random_model(steps=2000)
+
+    def total(scale, one_kernel=True):
+        m = model._replace(transition_cov=scale * model.transition_cov)
+        filtered = parallel.sequential_filter(m, prior, one_kernel=one_kernel)
+        smoothed = parallel.sequential_smoother(m, filtered, one_kernel=one_kernel)
+        return jnp.sum(filtered.log_likelihoods) + jnp.sum(smoothed.mean) + jnp.sum(smoothed.cov)
+
+    assert small_calls(total, 1.0) >= 2 and small_calls(jax.grad(total), 1.0) >= 2
+    assert small_calls(lambda s: total(s, one_kernel=False), 1.0) == 0
+    fused = jax.jit(jax.value_and_grad(total))(1.3)
+    plain = jax.jit(jax.value_and_grad(lambda s: total(s, one_kernel=False)))(1.3)
     np.testing.assert_allclose(fused, plain, rtol=1e-12)
 
 

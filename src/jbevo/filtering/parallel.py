@@ -39,6 +39,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from jbevo.filtering import linalg
+from jbevo.filtering.blocked_scan import blocked_scan
 from jbevo.filtering.ukf import GaussianState
 
 _LOG_2PI = 1.8378770664093453
@@ -181,21 +182,30 @@ def filter(model: AffineModel, prior: GaussianState, mask: Bool[Array, "T m"] | 
     return _result(model, prior, elements.b, elements.c, observed)
 
 
-def sequential_filter(model: AffineModel, prior: GaussianState, mask: Bool[Array, "T m"] | None = None) -> AffineFilterResult:
-    """The same Kalman filter as :func:`filter`, one step after the other (``lax.scan``)."""
+def sequential_filter(
+    model: AffineModel, prior: GaussianState, mask: Bool[Array, "T m"] | None = None, *, one_kernel: bool = True
+) -> AffineFilterResult:
+    """The same Kalman filter as :func:`filter`, one step after the other (``lax.scan``). The
+    step's products are elementwise (:func:`jbevo.filtering.linalg.matmul`), so that with
+    ``one_kernel`` its loop compiles as one XLA:CPU kernel
+    (:func:`jbevo.filtering.cpu_kernel.one_kernel`; the same results to round-off)."""
     observed = _observed(model, mask)
     model = observed_model(model, mask)
+    mm, mv = linalg.matmul, linalg.matvec
 
     def step(belief, inputs):
         f, u, q, h, d, r, z = inputs
-        mean = f @ belief.mean + u
-        cov = linalg.symmetrize(f @ belief.cov @ f.T + q)
-        s = linalg.symmetrize(h @ cov @ h.T + r)
-        gain = linalg.cho_solve(linalg.cholesky(s), h @ cov).T
-        new = GaussianState(mean + gain @ (z - h @ mean - d), linalg.symmetrize(cov - gain @ s @ gain.T))
+        ft, ht = f.T, h.T
+        mean = mv(f, belief.mean) + u
+        cov = linalg.symmetrize(mm(mm(f, belief.cov), ft) + q)
+        h_cov = mm(h, cov)
+        s = linalg.symmetrize(mm(h_cov, ht) + r)
+        gain = linalg.cho_solve(linalg.cholesky(s), h_cov).T
+        new_mean = mean + mv(gain, z - mv(h, mean) - d)
+        new = GaussianState(new_mean, linalg.symmetrize(cov - mm(mm(gain, s), gain.T)))
         return new, new
 
-    _, beliefs = jax.lax.scan(step, prior, tuple(model))
+    _, beliefs = blocked_scan(step, prior, tuple(model), block=1, one_kernel=one_kernel)
     return _result(model, prior, beliefs.mean, beliefs.cov, observed)
 
 
@@ -238,19 +248,20 @@ def smooth(model: AffineModel, filtered: AffineFilterResult) -> GaussianState:
     return GaussianState(elements.g, elements.l)
 
 
-def sequential_smoother(model: AffineModel, filtered: AffineFilterResult) -> GaussianState:
-    """The same RTS smoother as :func:`smooth`, one step after the other (``lax.scan``)."""
+def sequential_smoother(model: AffineModel, filtered: AffineFilterResult, *, one_kernel: bool = True) -> GaussianState:
+    """The same RTS smoother as :func:`smooth`, one step after the other (``lax.scan``; its
+    loop as one XLA:CPU kernel with ``one_kernel``, as in :func:`sequential_filter`)."""
     elements = _smoother_elements(model, filtered)
 
     def back(later, element):
-        mean = element.e @ later.mean + element.g
-        cov = linalg.symmetrize(element.e @ later.cov @ element.e.T + element.l)
+        mean = linalg.matvec(element.e, later.mean) + element.g
+        cov = linalg.symmetrize(linalg.matmul(linalg.matmul(element.e, later.cov), element.e.T) + element.l)
         new = GaussianState(mean, cov)
         return new, new
 
     last = GaussianState(filtered.filtered_mean[-1], filtered.filtered_cov[-1])
     inner = jax.tree.map(lambda a: a[:-1], elements)
-    _, beliefs = jax.lax.scan(back, last, inner, reverse=True)
+    _, beliefs = blocked_scan(back, last, inner, block=1, reverse=True, one_kernel=one_kernel)
     return GaussianState(jnp.concatenate([beliefs.mean, last.mean[None]]), jnp.concatenate([beliefs.cov, last.cov[None]]))
 
 
