@@ -118,8 +118,9 @@ def test_localization_ukf_and_its_gradient_compile_as_one_kernel():
 
 @pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
 def test_affine_sequential_filter_and_smoother_compile_as_one_kernel():
-    """The Kalman filter and RTS smoother of the IPLS's sequential pass hold the call, with and
-    without missing data, and equal their plain loops and the gradient through them."""
+    """The Kalman filter and RTS smoother of the IPLS's sequential pass hold the call (a model
+    with missing entries and a step without data) and equal their plain loops, value and
+    gradient."""
     model, prior = random_model(steps=2000)
 
     def total(scale, one_kernel=True):
