@@ -79,20 +79,48 @@ def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1, on
     return run
 
 
-def make_grad(block, one_kernel: bool = True):
-    """The gradient of the covariance filter's log-likelihood with respect to the initial mean
-    (the cost of learning through the filter), its loop in blocks of ``block`` steps."""
+def make_log_likelihood(block=1, one_kernel: bool = True, check_inputs: bool = True):
+    """The covariance filter's log-likelihood of one sequence, ``(x0, increments, fixes) ->
+    scalar``, its loop in blocks of ``block`` steps."""
     model = planar_pose_model()
     scheme = MerweScaled(ALPHA, BETA, KAPPA)
 
     def log_likelihood(x0, increments, fixes):
         prior = ukf.GaussianState(x0, jnp.asarray(P0))
         res = ukf.filter(
-            model, prior, increments, fixes, jnp.asarray(Q), jnp.asarray(R), scheme=scheme, block=block, one_kernel=one_kernel
+            model,
+            prior,
+            increments,
+            fixes,
+            jnp.asarray(Q),
+            jnp.asarray(R),
+            scheme=scheme,
+            block=block,
+            one_kernel=one_kernel,
+            check_inputs=check_inputs,
         )
         return res.log_likelihood
 
-    return jax.jit(jax.grad(log_likelihood))
+    return log_likelihood
+
+
+def make_grad(block, one_kernel: bool = True):
+    """The gradient of the covariance filter's log-likelihood with respect to the initial mean
+    (the cost of learning through the filter), its loop in blocks of ``block`` steps."""
+    return jax.jit(jax.grad(make_log_likelihood(block, one_kernel)))
+
+
+def dynamax_start(x0, increments, fixes):
+    """dynamax's starting beliefs and fixes for a batch of sequences. dynamax updates first, then
+    predicts step t + 1 with inputs[t + 1]: it starts from jbevo's first prediction, so that its
+    filtered means are jbevo's; its yaw is averaged linearly, so its fixes' yaw is unwrapped."""
+
+    def first_prediction(mean, u):
+        prior = ukf.GaussianState(mean, jnp.asarray(P0))
+        return ukf.predict(planar_pose_model(), prior, u, jnp.asarray(Q), MerweScaled(ALPHA, BETA, KAPPA))
+
+    pred0 = jax.vmap(first_prediction)(x0, increments[:, 0])
+    return pred0, fixes.at[..., 2].set(jnp.unwrap(fixes[..., 2], axis=-1))
 
 
 def small_calls(fn, *args) -> int:
@@ -295,14 +323,7 @@ def main(argv=None) -> dict:
         assert small_calls(jb_single, *single_args) > 0 and small_calls(sqrt_single, *single_args) > 0
         assert small_calls(plain_loops["jbevo_single_plain_loop"], *single_args) == small_calls(sqrt_lapack, *single_args) == 0
 
-    # dynamax updates first, then predicts step t + 1 with inputs[t + 1]: start it from jbevo's
-    # first prediction, so that its filtered means are jbevo's.
-    def first_prediction(mean, u):
-        prior = ukf.GaussianState(mean, jnp.asarray(P0))
-        return ukf.predict(planar_pose_model(), prior, u, jnp.asarray(Q), MerweScaled(ALPHA, BETA, KAPPA))
-
-    pred0 = jax.vmap(first_prediction)(x0, seqs.increments[:, 0])
-    fixes_unwrapped = seqs.fixes.at[..., 2].set(jnp.unwrap(seqs.fixes[..., 2], axis=-1))
+    pred0, fixes_unwrapped = dynamax_start(x0, seqs.increments, seqs.fixes)
     dyn_inputs = seqs.increments
     dyn = make_dynamax_runner()
     dyn_single = jax.jit(lambda m, P, u, z: dyn(m, P, u, z))

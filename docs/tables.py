@@ -192,6 +192,36 @@ def ukf_tria() -> str:
     )
 
 
+def batch_last() -> str:
+    d = record("benchmarks/results/batch_last.json")
+    runs, b = d["runs"], d["batch"]
+    rows = []
+    for key, label, ratio, against in [
+        ("jbevo_vmap64", f"UKF, jax.vmap over {b}", "vmap_speedup_vs_dynamax", "dynamax's UKF, vmapped"),
+        ("jbevo_batch_last64", f"UKF, vmap_last over {b}", "batch_last_speedup_vs_dynamax", "dynamax's UKF, vmapped"),
+        ("jbevo_batch_last64", f"UKF, vmap_last over {b}", "batch_last_speedup_vs_vmap", "jax.vmap"),
+        ("jbevo_grad_batch_last64", "gradient of the log-likelihoods, vmap_last", "grad_batch_last_speedup_vs_vmap", "jax.vmap"),
+    ]:
+        values, ratios = [r[key] for r in runs], [r[ratio] for r in runs]
+        rows.append(
+            [
+                label,
+                f"{np.median(values):,.0f} ({min(values):,.0f} - {max(values):,.0f})",
+                f"{np.median(ratios):.2f} ({min(ratios):.2f} - {max(ratios):.2f}) x {against}",
+            ]
+        )
+    rows.append(["dynamax's UKF, vmapped", f"{d['dynamax_vmap64']:,.0f}", ""])
+    rows.append(
+        [
+            f"max difference from jax.vmap: means and covariances {d['max_abs_diff_batch_last_vs_vmap']:.0e}, "
+            f"gradient {d['max_rel_diff_grad_batch_last_vs_vmap']:.0e} (relative)",
+            "",
+            "",
+        ]
+    )
+    return table([f"method ({len(runs)} runs, T = {d['T']:,})", "steps/s, median (range)", "speed-up, median (range)"], rows)
+
+
 def parallel_in_time() -> str:
     d = record("benchmarks/results/parallel_in_time.json")
     rows = []
@@ -1165,6 +1195,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "forward_fusion_sweep": forward_fusion_sweep,
     "forward_fusion_street_world": forward_fusion_street_world,
     "parallel_in_time": parallel_in_time,
+    "batch_last": batch_last,
     "attitude_synthetic": attitude_synthetic,
     "attitude_real": attitude_real,
     "attitude_real_headline": attitude_real_headline,

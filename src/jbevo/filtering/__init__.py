@@ -1,7 +1,7 @@
 """Filtering: the unscented transform, the unscented Kalman filter (covariance and square-root
 forms) and RTS smoother as pure JAX functions (``jit``, ``vmap``, ``grad``; exact missing-data
 handling), the iterated posterior-linearisation smoother with its affine Kalman filter and
-smoother parallel in time, learnable noise covariances and their fitting, the planar pose model,
+smoother parallel in time, batches held in the last axis (``vmap_last``), learnable noise covariances and their fitting, the planar pose model,
 and the small dense linear algebra they run on.
 
 Example::
@@ -15,6 +15,7 @@ Example::
 """
 
 from jbevo.filtering import (
+    batch_last,
     learning,
     linalg,
     noise,
@@ -26,6 +27,7 @@ from jbevo.filtering import (
     ukf,
     unscented,
 )
+from jbevo.filtering.batch_last import vmap_last
 from jbevo.filtering.noise import CholeskyCovariance, DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.smoother import SmootherResult, smooth
@@ -55,6 +57,7 @@ __all__ = [
     "UnscentedResult",
     "circular_mean_fn",
     "filter_blocks",
+    "batch_last",
     "learning",
     "linalg",
     "linear_update",
@@ -72,6 +75,7 @@ __all__ = [
     "unscented",
     "unscented_transform",
     "update",
+    "vmap_last",
     "wrapped_add_fn",
     "wrapped_residual_fn",
 ]
