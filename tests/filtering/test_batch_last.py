@@ -93,6 +93,18 @@ def test_compiles_as_one_kernel():
     assert 'xla_cpu_small_call="true"' in text
 
 
+def test_nested_calls_and_checkpoints_equal_vmap():
+    def fn(x, y):
+        inner = jax.checkpoint(lambda a: jnp.sin(a) * y[0] + a[::-1] ** 2 + a[:1])
+        return jax.jit(inner)(x), jnp.stack([x[0], y[1]])
+
+    x, y = jax.random.normal(jax.random.PRNGKey(0), (2, 6, 4))
+    x, y = x[:3], y[:2]
+    expected = jax.vmap(fn, in_axes=-1, out_axes=-1)(x, y)
+    for a, b in zip(expected, vmap_last(fn)(x, y), strict=True):
+        np.testing.assert_allclose(b, a, rtol=1e-14)
+
+
 def test_refuses_what_it_cannot_batch():
     with pytest.raises(NotImplementedError, match="'sort'"):
         vmap_last(jnp.sort)(jnp.ones((4, 3)))

@@ -37,7 +37,7 @@ _ELEMENTWISE = frozenset(
     nextafter stop_gradient""".split()
 )
 _REDUCTIONS = frozenset("reduce_sum reduce_max reduce_min reduce_prod reduce_and reduce_or argmax argmin".split())
-_CALLS = frozenset("pjit jit closed_call custom_jvp_call custom_vjp_call custom_vjp_call_jaxpr remat checkpoint".split())
+_CALLS = frozenset("pjit jit closed_call custom_jvp_call custom_vjp_call custom_vjp_call_jaxpr remat remat2 checkpoint".split())
 
 
 def _batched(x: Any, is_batched: bool, size: int) -> jax.Array:
@@ -124,8 +124,9 @@ def _rule(eqn: Any, values: list, flags: list[bool], size: int) -> tuple[list, l
         target, update = (_batched(v, b, size) for v, b in zip(values[:2], flags[:2], strict=True))
         return [lax.dynamic_update_slice(target, update, [*values[2:], 0])], [True]
     if name in _CALLS:
-        sub = _sub_jaxpr(p)
-        return _evaluate(sub.jaxpr, sub.consts, values, flags, size)
+        sub = _sub_jaxpr(p)  # a closed jaxpr, or an open one (jax.checkpoint's)
+        jaxpr, consts = (sub.jaxpr, sub.consts) if hasattr(sub, "consts") else (sub, ())
+        return _evaluate(jaxpr, consts, values, flags, size)
     if name == "cond" and not flags[0]:
         return _cond(p["branches"], values, flags, size)
     if name == "scan":
