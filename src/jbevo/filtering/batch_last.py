@@ -30,12 +30,7 @@ from jax.extend.core import Literal
 
 from jbevo.filtering import cpu_kernel
 
-_ELEMENTWISE = frozenset(
-    """abs acos acosh add and asin asinh atan atan2 atanh cbrt ceil clamp convert_element_type copy copy_p
-    cos cosh div eq exp exp2 expm1 floor ge gt integer_pow is_finite le log log1p logistic lt max min mul ne
-    neg not or pow rem round rsqrt select_n sign sin sinh sqrt square sub tan tanh xor erf erfc erf_inv
-    nextafter stop_gradient""".split()
-)
+_ELEMENTWISE = cpu_kernel.ELEMENTWISE_PRIMITIVES
 _REDUCTIONS = frozenset("reduce_sum reduce_max reduce_min reduce_prod reduce_and reduce_or argmax argmin".split())
 _CALLS = frozenset("pjit jit closed_call custom_jvp_call custom_vjp_call custom_vjp_call_jaxpr remat remat2 checkpoint".split())
 

@@ -41,19 +41,25 @@ from jax.experimental.xla_metadata import set_xla_metadata
 
 F = TypeVar("F", bound=Callable[..., Any])
 
-#: Primitives that the one-function path of XLA:CPU compiles, with their derivatives and batched
-#: forms; a function with any other primitive is not wrapped.
-KERNEL_PRIMITIVES = frozenset(
+#: Elementwise primitives (``stop_gradient`` included): one output element from the same element
+#: of each operand.
+ELEMENTWISE_PRIMITIVES = frozenset(
     {
-        # elementwise
         *"abs acos acosh add and asin asinh atan atan2 atanh cbrt ceil clamp convert_element_type".split(),
         *"copy copy_p cos cosh div eq exp exp2 expm1 floor ge gt integer_pow is_finite le log log1p".split(),
         *"logistic lt max min mul ne neg not or pow rem round rsqrt select_n sign sin sinh sqrt".split(),
-        *"square sub tan tanh xor erf erfc erf_inv nextafter".split(),
+        *"square sub tan tanh xor erf erfc erf_inv nextafter stop_gradient".split(),
+    }
+)
+
+#: Primitives that the one-function path of XLA:CPU compiles, with their derivatives and batched
+#: forms; a function with any other primitive is not wrapped.
+KERNEL_PRIMITIVES = ELEMENTWISE_PRIMITIVES | frozenset(
+    {
         # shapes, slices, reductions, products
         *"broadcast_in_dim reshape squeeze expand_dims slice dynamic_slice dynamic_update_slice".split(),
         *"concatenate stack unstack pad transpose rev iota split reduce_sum reduce_max reduce_min reduce_prod".split(),
-        *"reduce_and reduce_or argmax argmin stop_gradient".split(),
+        *"reduce_and reduce_or argmax argmin".split(),
         # control flow and calls (their jaxprs are checked too)
         *"scan while cond pjit jit closed_call custom_jvp_call custom_vjp_call custom_vjp_call_jaxpr".split(),
         *"remat checkpoint optimization_barrier".split(),
@@ -107,4 +113,4 @@ def one_kernel(fn: F) -> F:
     return wrapped  # type: ignore[return-value]
 
 
-__all__ = ["KERNEL_PRIMITIVES", "compiles_as_one_kernel", "one_kernel", "primitives"]
+__all__ = ["ELEMENTWISE_PRIMITIVES", "KERNEL_PRIMITIVES", "compiles_as_one_kernel", "one_kernel", "primitives"]
