@@ -113,16 +113,17 @@ def test_a_first_linearisation_at_the_prior_can_converge_to_a_wrong_fixed_point(
     assert position_rmse(default.smoothed_mean, seq.poses[1:]) < 0.3
 
 
-def test_gradient_matches_finite_differences():
-    # Through the sigma-point linearisation and the iterations; the parallel filter's and
-    # smoother's own gradients are checked in test_parallel.py (and equal the sequential ones).
+@pytest.mark.parametrize("parallel", [False, True], ids=["sequential", "parallel"])
+def test_gradient_matches_finite_differences(parallel):
+    # Through the sigma-point linearisation and the iterations, the affine passes sequential
+    # (lax.scan) or parallel in time (associative_scan).
     seq, fixes, initial = localization(20, gap=slice(8, 12))
     model = planar_pose_model()
     truth = seq.poses[1:]
 
     def loss(params):
         q, r = DiagonalCovariance(params["q"])(), DiagonalCovariance(params["r"])()
-        out = pl.smooth(model, initial, seq.increments, fixes, q, r, iterations=2, parallel_in_time=False)
+        out = pl.smooth(model, initial, seq.increments, fixes, q, r, iterations=2, parallel_in_time=parallel)
         d = out.smoothed_mean - truth
         return jnp.mean(d[:, 0] ** 2 + d[:, 1] ** 2 + wrap_angle(d[:, 2]) ** 2) - 1e-3 * out.log_likelihood
 

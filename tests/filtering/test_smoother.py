@@ -1,5 +1,6 @@
 """The unscented RTS smoother: equal to filterpy's on a nonlinear model with angles (also across a
-gap in the measurements), to the Kalman RTS smoother on a linear model, better than the filter,
+gap in the measurements), to the Kalman RTS smoother on a linear model (also with entries missing
+as NaN or by mask), better than the filter,
 with gradients that match finite differences."""
 
 import jax
@@ -118,6 +119,43 @@ def test_equals_the_kalman_rts_smoother_on_a_linear_model():
     s_means, s_covs, _, _ = kf.rts_smoother(means, covs)
     np.testing.assert_allclose(ours.smoothed_mean, s_means, atol=1e-9)
     np.testing.assert_allclose(ours.smoothed_cov, s_covs, atol=1e-9)
+
+
+def test_partial_and_masked_measurements_equal_the_kalman_smoother_of_the_observed_entries():
+    # A linear model with some measurements partly and some wholly missing, given as NaN or as a
+    # mask: the reference is filterpy's Kalman filter updated with the observed rows of H and R
+    # only (no update where none is observed), then its RTS smoother.
+    rng = np.random.default_rng(4)
+    n, m, steps = 3, 3, 80
+    a = np.eye(n) + 0.1 * rng.normal(size=(n, n))
+    h = rng.normal(size=(m, n))
+    qm, rm = np.diag(rng.uniform(0.01, 0.1, n)), np.diag(rng.uniform(0.1, 1.0, m))
+    zs, m0 = rng.normal(size=(steps, m)), rng.normal(size=n)
+    observed = rng.uniform(size=(steps, m)) > 0.3
+    observed[20:30] = False  # ten steps with nothing observed
+    model = ukf.StateSpaceModel(motion=lambda x, u: jnp.asarray(a) @ x, measurement=lambda x: jnp.asarray(h) @ x)
+    prior = ukf.GaussianState(jnp.asarray(m0), jnp.eye(n))
+
+    def smoothed(measurements, mask):
+        result = ukf.filter(model, prior, None, jnp.asarray(measurements), jnp.asarray(qm), jnp.asarray(rm), mask=mask)
+        return smooth(model, result, None, jnp.asarray(qm))
+
+    by_nan = smoothed(np.where(observed, zs, np.nan), None)
+    by_mask = smoothed(zs, jnp.asarray(observed))
+
+    kf = KalmanFilter(n, m)
+    kf.x, kf.P, kf.F, kf.Q = m0.copy(), np.eye(n), a, qm
+    means, covs = [], []
+    for z, seen in zip(zs, observed, strict=True):
+        kf.predict()
+        if seen.any():
+            kf.update(z[seen], R=rm[np.ix_(seen, seen)], H=h[seen])
+        means.append(kf.x.copy())
+        covs.append(kf.P.copy())
+    s_means, s_covs, _, _ = kf.rts_smoother(np.array(means), np.array(covs))
+    for ours in (by_nan, by_mask):
+        np.testing.assert_allclose(ours.smoothed_mean, s_means, atol=1e-9)
+        np.testing.assert_allclose(ours.smoothed_cov, s_covs, atol=1e-9)
 
 
 def test_smoothing_lowers_the_error_and_the_variance():
