@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from jbevo.filtering import parallel, ukf
-from jbevo.filtering.cpu_kernel import compiles_as_one_kernel, one_kernel, primitives
+from jbevo.filtering.cpu_kernel import LARGE_REDUCTION, batch_size, compiles_as_one_kernel, one_kernel, primitives
 from jbevo.filtering.planar import planar_pose_model
 from tests.filtering.references import P0, Q, R
 from tests.filtering.test_parallel import random_model
@@ -173,3 +173,58 @@ def test_constant_operands_compile():
     start, xs = (jnp.zeros(3), jnp.array(0)), jnp.ones((3000, 3))
     assert small_calls(one_kernel(with_table), start, xs) >= 1
     np.testing.assert_allclose(jax.jit(one_kernel(with_table))(start, xs)[1], with_table(start, xs)[1], rtol=1e-13)
+
+
+def test_batch_size_counts_the_copies_of_enclosing_vmaps():
+    seen = []
+
+    def record(x):
+        seen.append(batch_size(x, 1.0))
+        return jnp.sum(x**2)
+
+    x = jnp.ones((4, 3, 2))
+    record(x[0, 0])
+    jax.jit(jax.vmap(record))(x[0])
+    jax.jit(jax.vmap(jax.vmap(record)))(x)
+    jax.grad(lambda a: jnp.sum(jax.vmap(record)(a)))(x[0])
+    jax.jit(jax.vmap(jax.grad(record)))(x[0])
+    assert seen == [1, 3, 12, 3, 3]
+
+
+@pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
+@pytest.mark.parametrize("dtype", [jnp.float32, jnp.float64])
+def test_a_large_batch_runs_as_the_plain_loop(dtype):
+    """Batched, a sum over sigma points' outer products in a loop reaches XLA:CPU's size for
+    handing reductions to YNNPACK, which the one-function call cannot run (compiling failed):
+    such a batch is left to the plain loop, a small one keeps the call, and both compute."""
+
+    def covariances(points):
+        def step(total, xi):
+            w = jnp.arange(11, dtype=dtype)
+            total = total + jnp.sum(w[:, None, None] * xi[:, :, None] * xi[:, None, :], axis=0)
+            return total, total[0]
+
+        return jax.lax.scan(step, jnp.zeros((5, 5), dtype), points)
+
+    points = jax.random.normal(jax.random.PRNGKey(1), (64, 6, 11, 5), dtype)
+    assert 64 * 11 * 25 >= LARGE_REDUCTION > 2 * 11 * 25
+    for batch, calls in ((64, 0), (2, 1)):
+        fused = jax.vmap(one_kernel(covariances))
+        assert (small_calls(fused, points[:batch]) > 0) == bool(calls)
+        for a, b in zip(jax.jit(fused)(points[:batch]), jax.vmap(covariances)(points[:batch]), strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-5 if dtype == jnp.float32 else 1e-12)
+
+
+@pytest.mark.skipif(not ON_CPU, reason="the one-function call is XLA:CPU's")
+def test_the_ukf_vmapped_over_many_sequences_compiles():
+    model = planar_pose_model()
+    u = jnp.tile(jnp.array([0.5, 0.0, 0.02]), (100, 20, 1))
+    z = jnp.cumsum(u, axis=1) + 0.1
+
+    def means(u, z, one_kernel=True):
+        prior = ukf.GaussianState(jnp.zeros(3), jnp.asarray(P0))
+        return ukf.filter(model, prior, u, z, jnp.asarray(Q), jnp.asarray(R), one_kernel=one_kernel).filtered_mean
+
+    np.testing.assert_allclose(
+        jax.jit(jax.vmap(means))(u, z), jax.vmap(lambda a, b: means(a, b, one_kernel=False))(u, z), rtol=1e-12
+    )

@@ -14,7 +14,7 @@ It takes the primitives of :data:`jbevo.filtering.cpu_kernel.KERNEL_PRIMITIVES` 
 ``cond`` (on an unbatched index), nested ``jit`` and custom derivative rules (whose primal is
 evaluated: derivatives are those of the primal code, as for any JAX function). Anything else
 raises :class:`NotImplementedError` naming the primitive. The results equal ``jax.vmap``'s to
-round-off (``tests/filtering/test_batch_last.py``); ``benchmarks/batch_last.py`` measures the
+round-off (``tests/filtering/test_batch_last.py``); ``benchmarks/ukf.py`` measures the
 speed (docs/filtering.md).
 """
 
@@ -163,7 +163,9 @@ def _scan(p: dict, values: list, flags: list[bool], size: int) -> tuple[list, li
 def vmap_last(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` over a batch held in the last axis of every argument leaf (all leaves batched, of
     one batch size); every output leaf has the batch as its last axis. Compiled as one XLA:CPU
-    kernel where :func:`jbevo.filtering.cpu_kernel.one_kernel` allows. For the filters, pass
+    kernel where :func:`jbevo.filtering.cpu_kernel.one_kernel` allows (its operations grow with
+    the batch: the localization UKF is one kernel over up to 65 sequences, plain XLA code over
+    more; split a larger batch into such groups to keep the speed). For the filters, pass
     ``one_kernel=False`` inside ``fn`` (the whole batched function becomes the kernel) and
     ``check_inputs=False`` (their input checks factorise Q, R and P with LAPACK and raise through
     host callbacks, neither of which this batches: :class:`NotImplementedError`).
