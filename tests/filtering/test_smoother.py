@@ -99,14 +99,20 @@ def test_the_filters_gains_give_the_smoother_that_recomputes_them():
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
 
 
-def test_equals_the_kalman_rts_smoother_on_a_linear_model():
-    rng = np.random.default_rng(0)
-    n, m, steps = 4, 2, 150
+def linear_model(rng, n, m, steps):
+    """A random linear model: transition, observation, Q, R, measurements, initial mean and the
+    UKF's model of it."""
     a = np.eye(n) + 0.1 * rng.normal(size=(n, n))
     h = rng.normal(size=(m, n))
     qm, rm = np.diag(rng.uniform(0.01, 0.1, n)), np.diag(rng.uniform(0.1, 1.0, m))
     zs, m0 = rng.normal(size=(steps, m)), rng.normal(size=n)
     model = ukf.StateSpaceModel(motion=lambda x, u: jnp.asarray(a) @ x, measurement=lambda x: jnp.asarray(h) @ x)
+    return a, h, qm, rm, zs, m0, model
+
+
+def test_equals_the_kalman_rts_smoother_on_a_linear_model():
+    n, m = 4, 2
+    a, h, qm, rm, zs, m0, model = linear_model(np.random.default_rng(0), n, m, 150)
     result = ukf.filter(
         model, ukf.GaussianState(jnp.asarray(m0), jnp.eye(n)), None, jnp.asarray(zs), jnp.asarray(qm), jnp.asarray(rm)
     )
@@ -127,13 +133,9 @@ def test_partial_and_masked_measurements_equal_the_kalman_smoother_of_the_observ
     # only (no update where none is observed), then its RTS smoother.
     rng = np.random.default_rng(4)
     n, m, steps = 3, 3, 80
-    a = np.eye(n) + 0.1 * rng.normal(size=(n, n))
-    h = rng.normal(size=(m, n))
-    qm, rm = np.diag(rng.uniform(0.01, 0.1, n)), np.diag(rng.uniform(0.1, 1.0, m))
-    zs, m0 = rng.normal(size=(steps, m)), rng.normal(size=n)
+    a, h, qm, rm, zs, m0, model = linear_model(rng, n, m, steps)
     observed = rng.uniform(size=(steps, m)) > 0.3
     observed[20:30] = False  # ten steps with nothing observed
-    model = ukf.StateSpaceModel(motion=lambda x, u: jnp.asarray(a) @ x, measurement=lambda x: jnp.asarray(h) @ x)
     prior = ukf.GaussianState(jnp.asarray(m0), jnp.eye(n))
 
     def smoothed(measurements, mask):

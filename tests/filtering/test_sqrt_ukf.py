@@ -14,6 +14,7 @@ from jbevo.filtering.noise import DiagonalCovariance
 from jbevo.filtering.planar import planar_pose_model
 from jbevo.filtering.unscented import Julier, MerweScaled
 from tests.filtering.references import P0, Q, R, filterpy_localization, wrap_np
+from tests.filtering.test_ukf import run_localization
 from tests.helpers import check_leaf_gradients
 
 SCHEMES = [MerweScaled(), MerweScaled(0.5, 2.0, 1.0), MerweScaled(0.5, 0.0, 0.0), Julier()]  # Wc_0: 2, 0.75, -2.25, 0
@@ -77,15 +78,7 @@ def test_equals_filterpy_step_by_step_with_yaw_wrapping(scheme):
     seq = simulate_planar_sequence(jax.random.PRNGKey(1), 300, yaw_rate_std=0.2, fix_std=(0.5, 0.5, 0.3))
     assert np.any(np.abs(np.diff(np.asarray(seq.poses[:, 2]))) > np.pi), "the drive must cross +-pi"
     x0 = np.asarray(seq.poses[0]) + [0.3, -0.2, 0.05]
-    root = sqrt_ukf.filter(
-        planar_pose_model(),
-        ukf.GaussianState(jnp.asarray(x0), jnp.asarray(P0)),
-        seq.increments,
-        seq.fixes,
-        jnp.asarray(Q),
-        jnp.asarray(R),
-        scheme=scheme,
-    )
+    root = run_localization(x0, seq, form=sqrt_ukf, scheme=scheme)
     ref = filterpy_localization(x0, np.asarray(seq.increments), np.asarray(seq.fixes), scheme.alpha, scheme.beta, scheme.kappa)
     diff = np.asarray(root.filtered_mean) - ref["mean"]
     diff[:, 2] = wrap_np(diff[:, 2])

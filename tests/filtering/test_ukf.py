@@ -16,8 +16,9 @@ from tests.filtering.references import P0, Q, R, filterpy_localization, wrap_np
 pytestmark = pytest.mark.usefixtures("float64")
 
 
-def run_localization(x0, seq, *, scheme=MerweScaled(), q=Q, r=R, **kw):
-    return ukf.filter(
+def run_localization(x0, seq, *, form=ukf, scheme=MerweScaled(), q=Q, r=R, **kw):
+    """``form``'s filter (:mod:`ukf` or :mod:`sqrt_ukf`) on the localization model over ``seq``."""
+    return form.filter(
         planar_pose_model(),
         ukf.GaussianState(jnp.asarray(x0), jnp.asarray(P0)),
         seq.increments,
