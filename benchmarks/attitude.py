@@ -262,6 +262,14 @@ def main() -> None:
     results["rmse_deg_speed_aided_handset"] = rmse_deg([run_sa(sa0, s) for s in test_seqs], truths)
     sa, hist_sa = train_speed_aided(sa0, data, args.steps, args.lr)
     results["rmse_deg_speed_aided"] = rmse_deg([run_sa(sa, s) for s in test_seqs], truths)
+    # Offline: the unscented RTS smoother over the same filter's beliefs (hand-set and learned).
+    run_sas = eqx.filter_jit(
+        lambda f, s: run_speed_aided_smoothed(
+            f, *(jnp.asarray(s[k], jnp.float32) for k in ("gyro", "accel", "initial", "velocity"))
+        )
+    )
+    results["rmse_deg_speed_aided_smoothed_handset"] = rmse_deg([run_sas(sa0, s) for s in test_seqs], truths)
+    results["rmse_deg_speed_aided_smoothed"] = rmse_deg([run_sas(sa, s) for s in test_seqs], truths)
 
     # Diagnostic, not a result: Q and R fitted on the whole test drives and scored on them: about
     # the best each filter's structure reaches there.

@@ -9,7 +9,9 @@ peer is one composed of cuthbertlib's parts (unscented statistical linear regres
 steps in a ``lax.scan``); the square-root filter with its ``tria``
 (unrolled modified Gram-Schmidt) against the same filter with LAPACK's QR in its place; and
 jbevo's loops in blocks (``block="auto"``) against one ``lax.scan``: the filters, the smoother,
-vmapped, and the gradient of the log-likelihood (with compile times). The methods are timed in interleaved rounds (best of ``--repeats``), the whole
+vmapped, and the gradient of the log-likelihood (with compile times); and batches held in the
+last axis (``filtering.batch_last.vmap_last``: filter, smoother and the gradient) against
+``jax.vmap``. The methods are timed in interleaved rounds (best of ``--repeats``), the whole
 measurement repeated ``--runs`` times (the JSON keeps every run; its top-level figures are the
 medians over the runs). Writes ``benchmarks/results/ukf.json`` and prints a table.
 
@@ -37,6 +39,7 @@ import numpy as np  # noqa: E402
 from jbevo.data.synthetic.planar import simulate_planar_sequence  # noqa: E402
 from jbevo.files import write_json_atomic  # noqa: E402
 from jbevo.filtering import smoother, sqrt_ukf, ukf  # noqa: E402
+from jbevo.filtering.batch_last import vmap_last  # noqa: E402
 from jbevo.filtering.planar import planar_pose_model  # noqa: E402
 from jbevo.filtering.unscented import MerweScaled  # noqa: E402
 from jbevo.geometry import sincos, wrap_angle  # noqa: E402
@@ -307,6 +310,18 @@ def main(argv=None) -> dict:
         "jbevo_grad_single_plain_loop": make_grad(1, one_kernel=False),
     }
     jb_batch_plain = jax.jit(jax.vmap(make_jbevo(check_inputs=False, one_kernel=False)))
+    # The batch as every array's last axis (vmap_last compiles the whole as one kernel itself),
+    # and the gradient of the summed log-likelihoods with respect to the initial means.
+    leading = (x0, seqs.increments, seqs.fixes)
+    trailing = tuple(jnp.moveaxis(a, 0, -1) for a in leading)
+    batch_last = {
+        "jbevo_batch_last64": jax.jit(vmap_last(make_jbevo(check_inputs=False, one_kernel=False))),
+        "jbevo_smoother_batch_last64": jax.jit(vmap_last(make_jbevo(check_inputs=False, smoothed=True, one_kernel=False))),
+        "jbevo_grad_batch_last64": jax.jit(
+            jax.grad(lambda *a: jnp.sum(vmap_last(make_log_likelihood(one_kernel=False, check_inputs=False))(*a)))
+        ),
+    }
+    grad_batch = jax.jit(jax.grad(lambda *a: jnp.sum(jax.vmap(make_log_likelihood(check_inputs=False))(*a))))
     results_compile = {
         f"compile_s_{name}": compile_seconds(fn, x0[0], one.increments, one.fixes)
         for name, fn in (
@@ -364,13 +379,22 @@ def main(argv=None) -> dict:
             "cuthbertlib_uks_vmap64": lambda: cb_uks_batch(x0, seqs.increments, fixes_unwrapped),
             "jbevo_vmap64_blocked": lambda: jb_batch_blocked(x0, seqs.increments, seqs.fixes),
             "jbevo_vmap64_plain_loop": lambda: jb_batch_plain(x0, seqs.increments, seqs.fixes),
+            "jbevo_batch_last64": partial(batch_last["jbevo_batch_last64"], *trailing),
+            "jbevo_smoother_batch_last64": partial(batch_last["jbevo_smoother_batch_last64"], *trailing),
+        },
+        # Gradients over the batch in rounds of their own (their large buffers slow what runs
+        # beside them).
+        "batched_gradients": {
+            "jbevo_grad_vmap64": lambda: grad_batch(*leading),
+            "jbevo_grad_batch_last64": partial(batch_last["jbevo_grad_batch_last64"], *trailing),
         },
     }
     # Independent runs of the whole measurement: this shared VM's speed varies between them.
     runs = []
     for _ in range(args.runs):
         run = {name: steps / t for name, t in best_seconds_interleaved(timings["single"], args.repeats).items()}
-        run |= {name: batch * steps / t for name, t in best_seconds_interleaved(timings["batched"], args.repeats).items()}
+        for group in ("batched", "batched_gradients"):
+            run |= {name: batch * steps / t for name, t in best_seconds_interleaved(timings[group], args.repeats).items()}
         run["speedup_single_vs_dynamax"] = run["jbevo_single"] / run["dynamax_single"]
         run["speedup_vmap64_vs_dynamax"] = run["jbevo_vmap64"] / run["dynamax_vmap64"]
         run["speedup_vmap64_vs_dynamax_sincos"] = run["jbevo_vmap64"] / run["dynamax_vmap64_sincos"]
@@ -379,6 +403,10 @@ def main(argv=None) -> dict:
             run[f"smoother_speedup_{kind}_vs_dynamax"] = run[f"jbevo_smoother_{kind}"] / run[f"dynamax_uks_{kind}"]
             run[f"sqrt_speedup_{kind}_vs_cuthbertlib"] = run[f"jbevo_sqrt_{kind}"] / run[f"cuthbertlib_{kind}"]
             run[f"smoother_speedup_{kind}_vs_cuthbertlib"] = run[f"jbevo_smoother_{kind}"] / run[f"cuthbertlib_uks_{kind}"]
+        run["batch_last_speedup_vs_vmap"] = run["jbevo_batch_last64"] / run["jbevo_vmap64"]
+        run["speedup_batch_last64_vs_dynamax"] = run["jbevo_batch_last64"] / run["dynamax_vmap64"]
+        run["smoother_speedup_batch_last64_vs_dynamax"] = run["jbevo_smoother_batch_last64"] / run["dynamax_uks_vmap64"]
+        run["grad_batch_last_speedup_vs_vmap"] = run["jbevo_grad_batch_last64"] / run["jbevo_grad_vmap64"]
         run["tria_speedup_vs_lapack_qr"] = run["jbevo_sqrt_single"] / run["jbevo_sqrt_single_lapack_qr"]
         run["speedup_single_vs_dynamax_blocked"] = run["jbevo_single_blocked"] / run["dynamax_single"]
         run["smoother_speedup_single_vs_dynamax_blocked"] = run["jbevo_smoother_single_blocked"] / run["dynamax_uks_single"]
@@ -434,6 +462,17 @@ def main(argv=None) -> dict:
             for ours, plain in ((jb_single, "jbevo_single_plain_loop"), (smooth_single, "jbevo_smoother_single_plain_loop"))
             for a, b in zip(ours(*single_args), plain_loops[plain](*single_args), strict=True)
         )
+    )
+    results["max_abs_diff_batch_last_vs_vmap"] = float(
+        max(
+            np.abs(np.asarray(jnp.moveaxis(a, -1, 0)) - np.asarray(b)).max()
+            for ours, theirs in (("jbevo_batch_last64", jb_batch), ("jbevo_smoother_batch_last64", smooth_batch))
+            for a, b in zip(batch_last[ours](*trailing), theirs(*leading), strict=True)
+        )
+    )
+    g_last, g_vmap = batch_last["jbevo_grad_batch_last64"](*trailing), grad_batch(*leading)
+    results["max_rel_diff_grad_batch_last_vs_vmap"] = float(
+        np.abs(np.asarray(jnp.moveaxis(g_last, -1, 0)) - np.asarray(g_vmap)).max() / np.abs(np.asarray(g_vmap)).max()
     )
     results["speedup_single_vs_filterpy"] = results["jbevo_single"] / results["filterpy_single"]
     results["machine"] = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}"
@@ -499,6 +538,7 @@ def print_table(r: dict) -> None:
     print(f"{'dynamax':<10} {r['dynamax_single']:>18,.0f} {r['dynamax_vmap64']:>22,.0f}")
     print(f"{'dynamax*':<10} {'-':>18} {r['dynamax_vmap64_sincos']:>22,.0f}")
     print(f"{'filterpy':<10} {r['filterpy_single']:>18,.0f} {'-':>22}")
+    print(f"{'jbevo, batch last':<10} {'-':>18} {r['jbevo_batch_last64']:>22,.0f}")
     print(
         f"jbevo/dynamax: single {r['speedup_single_vs_dynamax']:.2f}x, vmap {r['speedup_vmap64_vs_dynamax']:.2f}x; "
         f"jbevo/filterpy {r['speedup_single_vs_filterpy']:.0f}x; jbevo with input checks "
@@ -527,6 +567,13 @@ def print_table(r: dict) -> None:
         f"with RTS {r['cuthbertlib_uks_single']:,.0f} / {r['cuthbertlib_uks_vmap64']:,.0f} (jbevo's smoother "
         f"{r['smoother_speedup_single_vs_cuthbertlib']:.2f}x / {r['smoother_speedup_vmap64_vs_cuthbertlib']:.2f}x); "
         f"max |difference| filter {r['max_abs_diff_vs_cuthbertlib']:.1e}, smoother {r['max_abs_diff_smoother_vs_cuthbertlib']:.1e}"
+    )
+    print(
+        f"batch last (vmap_last) over {r['batch']}: filter {r['batch_last_speedup_vs_vmap']:.2f}x jax.vmap, "
+        f"{r['speedup_batch_last64_vs_dynamax']:.2f}x dynamax vmapped; filter + smoother "
+        f"{r['smoother_speedup_batch_last64_vs_dynamax']:.2f}x dynamax UKS vmapped; gradient "
+        f"{r['grad_batch_last_speedup_vs_vmap']:.2f}x jax.vmap's; max |batch last - vmap| "
+        f"{r['max_abs_diff_batch_last_vs_vmap']:.1e}, gradient {r['max_rel_diff_grad_batch_last_vs_vmap']:.1e} (relative)"
     )
 
 
