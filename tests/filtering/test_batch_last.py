@@ -93,13 +93,16 @@ def test_compiles_as_one_kernel():
     assert 'xla_cpu_small_call="true"' in text
 
 
-def test_a_large_batch_compiles_and_equals_vmap():
-    # 128 sequences: the step's sums over sigma points exceed what one kernel can run, so the
-    # batch-last program runs as XLA's plain program instead (cpu_kernel.LARGE_REDUCTION).
-    x0, increments, fixes = (jnp.tile(a, (26,) + (1,) * (a.ndim - 1))[:128] for a in drives())
-    args = (x0, increments, fixes, jnp.full(128, 1.0))
-    ours = jax.jit(vmap_last(run()))(*map(last, args))
-    for a, b in zip(ours, jax.vmap(run())(*args), strict=True):
+def test_a_large_batch_runs_in_groups_and_equals_vmap():
+    # 129 sequences: the step's sums over sigma points exceed what one kernel can run
+    # (cpu_kernel.LARGE_REDUCTION), so the batch runs as groups of 64 (the last one padded), each
+    # one kernel.
+    x0, increments, fixes = (jnp.tile(a, (26,) + (1,) * (a.ndim - 1))[:129] for a in drives())
+    args = (x0, increments, fixes, jnp.full(129, 1.0))
+    batched = jax.jit(vmap_last(run()))
+    if jax.default_backend() == "cpu":
+        assert 'xla_cpu_small_call="true"' in batched.lower(*map(last, args)).compile().as_text()
+    for a, b in zip(batched(*map(last, args)), jax.vmap(run())(*args), strict=True):
         np.testing.assert_allclose(first(a), b, rtol=1e-9, atol=1e-12)
 
 

@@ -160,12 +160,25 @@ def _scan(p: dict, values: list, flags: list[bool], size: int) -> tuple[list, li
     return [*carry, *ys], [True] * (n_carry + len(ys))
 
 
+def _kernel_group(run_group: Callable[[int], Callable], examples: list, size: int) -> int:
+    """The batch itself where it compiles as one kernel; else the largest group of sequences
+    (halving from the batch) that does; the batch where not even one sequence does."""
+    group = size
+    while group >= 1:
+        shapes = [jax.ShapeDtypeStruct((*e.shape, group), e.dtype) for e in examples]
+        if cpu_kernel.compiles_as_one_kernel(run_group(group), *shapes):
+            return group
+        group //= 2
+    return size
+
+
 def vmap_last(fn: Callable[..., Any]) -> Callable[..., Any]:
     """``fn`` over a batch held in the last axis of every argument leaf (all leaves batched, of
     one batch size); every output leaf has the batch as its last axis. Compiled as one XLA:CPU
-    kernel where :func:`jbevo.filtering.cpu_kernel.one_kernel` allows (its operations grow with
-    the batch: the localization UKF is one kernel over up to 65 sequences, plain XLA code over
-    more; split a larger batch into such groups to keep the speed). For the filters, pass
+    kernel where :func:`jbevo.filtering.cpu_kernel.one_kernel` allows. Its operations grow with
+    the batch: a batch too large for one kernel (the localization UKF over more than 65
+    sequences) runs as a loop over groups that fit (halving the batch until one does; the last
+    group padded with copies of the first sequence). For the filters, pass
     ``one_kernel=False`` inside ``fn`` (the whole batched function becomes the kernel) and
     ``check_inputs=False`` (their input checks factorise Q, R and P with LAPACK and raise through
     host callbacks, neither of which this batches: :class:`NotImplementedError`).
@@ -191,11 +204,24 @@ def vmap_last(fn: Callable[..., Any]) -> Callable[..., Any]:
         closed, out_shapes = jax.make_jaxpr(one, return_shape=True)(*examples)
         out_tree = jax.tree.structure(out_shapes)
 
-        def run(*flat):
-            outs, flags = _evaluate(closed.jaxpr, closed.consts, flat, [True] * len(flat), size)
-            return [_batched(o, b, size) for o, b in zip(outs, flags, strict=True)]
+        def run_group(group: int) -> Callable[..., list]:
+            def run(*flat):
+                outs, flags = _evaluate(closed.jaxpr, closed.consts, flat, [True] * len(flat), group)
+                return [_batched(o, b, group) for o, b in zip(outs, flags, strict=True)]
 
-        return jax.tree.unflatten(out_tree, cpu_kernel.one_kernel(run)(*leaves))
+            return run
+
+        group = _kernel_group(run_group, examples, size)
+        if group == size:
+            return jax.tree.unflatten(out_tree, cpu_kernel.one_kernel(run_group(size))(*leaves))
+        # Groups of ``group`` sequences, one kernel each, in a loop over the groups (the batch
+        # padded with copies of its first sequence to a whole number of groups).
+        count = -(-size // group)
+        padded = [jnp.concatenate([leaf, jnp.repeat(leaf[..., :1], count * group - size, axis=-1)], axis=-1) for leaf in leaves]
+        grouped = [jnp.moveaxis(leaf.reshape(*leaf.shape[:-1], count, group), -2, 0) for leaf in padded]
+        outs = jax.lax.map(lambda chunk: cpu_kernel.one_kernel(run_group(group))(*chunk), grouped)
+        outs = [jnp.moveaxis(o, 0, -2).reshape(*o.shape[1:-1], count * group)[..., :size] for o in outs]
+        return jax.tree.unflatten(out_tree, outs)
 
     return batched
 
