@@ -12,8 +12,20 @@ zero); and a sweep of the fusion's accelerometer noise (``accel_std``), which wa
 these runs before the hand-set value was written down: it says how much the rows depend on that
 choice, not which value is best. The two warm rows also run on the street world's copies of the
 runs (``benchmarks/street_world.py``'s street world: the real IMU, truth and frame times, rendered
-images). Keys: ``runs[<run>][<variant>][<metric>]`` and ``street_world[<run>][<variant>][<metric>]``,
-``<run>`` as in ``real_kitti.json``.
+images).
+
+Long drives: the street world's KITTI 09 and 10 whole, rendered as
+``experiments/kitti_odometry.py --world street`` renders them (its test drives, simulated IMU),
+with the preset, the preset with forward fusion and forward fusion without its bias state; scored
+by the KITTI devkit (``t_err_pct``, ``r_err_deg_per_100m``, 100-800 m segments) and the metrics
+above. ``bias_walk_sweep``: the bias's walk among 0.005, 0.02 and 0.05 m/s^2 per square root of a
+second on the street world's KITTI 00 and 08 (the first 800 frames, rendered with seed 100; a
+training and the validation drive of that experiment), where the hand-set value
+(:data:`jbevo.models.forward_fusion.BIAS_WALK`) was chosen.
+
+Keys: ``runs[<run>][<variant>][<metric>]``, ``street_world[<run>][<variant>][<metric>]`` (``<run>``
+as in ``real_kitti.json``), ``kitti_street[<drive>][<variant>][<metric>]`` (``<drive>`` 09, 10 or
+pooled) and ``bias_walk_sweep[<drive>][<variant>][<metric>]``.
 
     JBEVO_REFERENCE_DATA=../shared/data python benchmarks/forward_fusion.py
 """
@@ -29,18 +41,38 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
+from jbevo.data.catalog import load_sequences
 from jbevo.data.synthetic.sequences import synthetic_copy
 from jbevo.data.synthetic.world import World
+from jbevo.eval.batch import run_many
+from jbevo.eval.devkit import SEGMENT_LENGTHS
+from jbevo.eval.scores import score
 from jbevo.files import write_json_atomic
-from jbevo.models import relative_motion
-from jbevo.models.forward_fusion import ForwardFusion
+from jbevo.geometry import BevGrid
+from jbevo.models import Bevo, relative_motion
+from jbevo.models.forward_fusion import BIAS_WALK, ForwardFusion
 from jbevo.models.presets import street_model
 from jbevo.models.runners import run_bevo
-from real_kitti import RESULTS, half_frames, load_runs, segments
+from real_kitti import RESULTS, half_frames, load_runs, scores, segments
 from street_world import STREET
 
-#: The rows also run on the street world's copies of the runs.
-ON_STREET_WORLD = ("street + robust bands", "street + robust bands, forward fusion")
+#: The rows also run on the street world's copies of the runs and its long drives.
+ON_STREET_WORLD = (
+    "street + robust bands",
+    "street + robust bands, forward fusion",
+    "street + robust bands, forward fusion without its bias state",
+)
+
+#: The bias walks of the sweep (m/s^2 per square root of a second).
+BIAS_WALK_SWEEP = (0.005, 0.02, 0.05)
+
+#: The long drives: the KITTI-style experiment's test drives and their rendering seed, and the
+#: sweep's drives, frames and seed.
+LONG_DRIVES, LONG_SEED = ("09", "10"), 900
+SWEEP_DRIVES, SWEEP_FRAMES, SWEEP_SEED = ("00", "08"), 800, 100
+
+#: The KITTI-style experiment's BEV grid.
+KITTI_GRID = BevGrid(0.1, (256, 256), near=4.0)
 
 #: The accelerometer noise values of the sweep (m/s^2 per IMU sample): 1.58 is the attitude
 #: filter's own speed walk (0.05 m/s per 10-sample frame) in these units.
@@ -53,13 +85,22 @@ def along_across(increments: np.ndarray, seq, start: int, stop: int) -> dict:
     return {"along_cm": 100 * float(np.sqrt(np.mean(err[:, 0] ** 2))), "across_cm": 100 * float(np.sqrt(np.mean(err[:, 1] ** 2)))}
 
 
-def rows(imu_dt: float) -> dict[str, tuple]:
+def without_bias(model):
+    """``model``'s forward fusion without its bias state (no prior, a negligible walk)."""
+    return dataclasses.replace(
+        model, forward=dataclasses.replace(model.forward, bias_std=0.0, log_bias_walk=jnp.log(jnp.float32(1e-9)))
+    )
+
+
+def rows(imu_dt: float, grid: BevGrid | None = None) -> dict[str, tuple]:
     """Label -> (model, warm start)."""
-    preset = street_model(imu_dt, bands=True)
-    fused = street_model(imu_dt, bands=True, forward_fusion=True)
+    grid = grid or street_model(imu_dt).grid
+    preset = street_model(imu_dt, grid, bands=True)
+    fused = street_model(imu_dt, grid, bands=True, forward_fusion=True)
     out = {
         "street + robust bands": (preset, True),
         "street + robust bands, forward fusion": (fused, True),
+        "street + robust bands, forward fusion without its bias state": (without_bias(fused), True),
         "street + robust bands, cold start": (preset, False),
         "street + robust bands, forward fusion, cold start": (fused, False),
     }
@@ -67,6 +108,48 @@ def rows(imu_dt: float) -> dict[str, tuple]:
         model = dataclasses.replace(fused, forward=ForwardFusion.create(accel_std=accel_std))
         out[f"forward fusion, accel_std {accel_std} (sweep)"] = (model, True)
     return out
+
+
+def long_models(imu_dt: float) -> dict[str, Bevo]:
+    """The long drives' rows: :data:`ON_STREET_WORLD` on the KITTI-style grid."""
+    models = rows(imu_dt, KITTI_GRID)
+    return {label: models[label][0] for label in ON_STREET_WORLD}
+
+
+def sweep_models(imu_dt: float) -> dict[str, Bevo]:
+    """The bias walk sweep's rows: the preset, forward fusion without the bias state and with each
+    walk of :data:`BIAS_WALK_SWEEP`."""
+    models = long_models(imu_dt)
+    fused = models.pop("street + robust bands, forward fusion")
+    walks = {
+        f"forward fusion, bias_walk {w}": dataclasses.replace(fused, forward=ForwardFusion.create(bias_walk=w))
+        for w in BIAS_WALK_SWEEP
+    }
+    return models | walks
+
+
+def long_drives(reference: Path, names, frames: int, seed: int, make_models, devkit: bool) -> dict[str, dict]:
+    """The models ``make_models(imu_dt)`` (label -> model) on the street world's KITTI drives
+    ``names``: the metrics of ``real_kitti.scores`` per drive, with ``devkit`` also the devkit's
+    t_err and r_err per drive and pooled."""
+    seqs = load_sequences(
+        "kitti-synthetic", list(names), frames, reference / "kitti_odom" / "gt_poses", camera="kitti", seed=seed, world="street"
+    )
+    table: dict[str, dict] = {}
+    for label, model in make_models(seqs[0].imu_dt).items():
+        outs, _ = run_many(model, seqs, warm_start=True)
+        for name, out, seq in zip(names, outs, seqs):
+            row = scores(out.increments, out.pitch_roll, seq, 0, seq.num_frames) | along_across(
+                out.increments, seq, 0, seq.num_frames
+            )
+            if devkit:
+                row |= {k: score(out, seq, SEGMENT_LENGTHS)[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
+            table.setdefault(name, {})[label] = row
+            print(f"{name} {label}: final {row['final_pct']:.2f} %, motion {row['motion_cm']:.1f} cm", flush=True)
+        if devkit:
+            pooled = score(outs, seqs, SEGMENT_LENGTHS)
+            table.setdefault("pooled", {})[label] = {k: pooled[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
+    return table
 
 
 def main() -> None:
@@ -98,10 +181,14 @@ def main() -> None:
         copy = synthetic_copy(seq, world, STREET, seed=int(name))
         for label in ON_STREET_WORLD:
             put("street_world", name, label, run_bevo(models[label][0], copy, warm_start=True), seq)
+    tables["kitti_street"] = long_drives(Path(root), LONG_DRIVES, 0, LONG_SEED, long_models, devkit=True)
+    tables["bias_walk_sweep"] = long_drives(Path(root), SWEEP_DRIVES, SWEEP_FRAMES, SWEEP_SEED, sweep_models, devkit=False)
     settings = {
         "accel_std": float(jnp.exp(ForwardFusion.create().log_accel_std)),
         "displacement_std": float(jnp.exp(ForwardFusion.create().log_displacement_std)),
+        "bias_walk": BIAS_WALK,
         "sweep": list(SWEEP),
+        "bias_walk_sweep": list(BIAS_WALK_SWEEP),
         "town": args.town,
     }
     write_json_atomic(args.out, tables | {"settings": settings, "seconds": time.time() - started})

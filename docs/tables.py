@@ -1052,6 +1052,40 @@ def forward_fusion_street_world() -> str:
     return _forward_rows("street_world", "street world's copy: model")
 
 
+def forward_fusion_long() -> str:
+    """The street world's KITTI 09 and 10, whole: the devkit's errors per drive and pooled, and
+    the per-frame metrics per drive."""
+    d = record(FORWARD_FUSION)["kitti_street"]
+    drives = [name for name in d if name != "pooled"]
+    rows = []
+    for model in d["pooled"]:
+        pooled = d["pooled"][model]
+        cells = [num(d[name][model]["t_err_pct"], 2) for name in drives]
+        cells += [num(pooled["t_err_pct"], 2), num(pooled["r_err_deg_per_100m"], 2)]
+        for name in drives:
+            m = d[name][model]
+            cells.append(f"{num(m['distance_ratio'], 3)} / {num(m['motion_cm'], 1)} / {num(m['along_cm'], 1)}")
+        rows.append([model] + cells)
+    header = ["model"] + [f"{name} t_err (%)" for name in drives] + ["pooled t_err (%)", "pooled r_err (deg/100 m)"]
+    header += [f"{name}: distance ratio / motion RMSE / along the heading (cm)" for name in drives]
+    return table(header, rows)
+
+
+def forward_fusion_bias_sweep() -> str:
+    """The bias walk sweep on the street world's KITTI 00 and 08 (first frames)."""
+    d = record(FORWARD_FUSION)["bias_walk_sweep"]
+    drives = list(d)
+    rows = []
+    for model in d[drives[0]]:
+        cells = []
+        for name in drives:
+            m = d[name][model]
+            cells += [num(m["final_pct"], 2), num(m["motion_cm"], 1), num(m["distance_ratio"], 3)]
+        rows.append([model] + cells)
+    header = ["model"] + [f"{name}: {c}" for name in drives for c in ("final (%)", "motion (cm)", "distance ratio")]
+    return table(header, rows)
+
+
 def real_kitti_keyframes_speed() -> str:
     speed = record(REAL_KITTI)["frames_per_s"]
     ratios = [v["street + robust bands, keyframes"] / v["street + robust bands"] for v in speed.values()]
@@ -1216,6 +1250,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "forward_fusion": forward_fusion,
     "forward_fusion_sweep": forward_fusion_sweep,
     "forward_fusion_street_world": forward_fusion_street_world,
+    "forward_fusion_long": forward_fusion_long,
+    "forward_fusion_bias_sweep": forward_fusion_bias_sweep,
     "parallel_in_time": parallel_in_time,
     "batch_last": batch_last,
     "attitude_synthetic": attitude_synthetic,

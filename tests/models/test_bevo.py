@@ -163,7 +163,7 @@ def test_forward_fusion_replaces_the_forward_motion_only(level_drive):
 
 
 def test_forward_fusion_gradients_match_finite_differences(float64, level_drive):
-    """The forward fusion's two noise parameters in the street model, against central
+    """The forward fusion's three noise parameters in the street model, against central
     differences (the other leaves are checked above)."""
     model = dataclasses.replace(street_model(level_drive.imu_dt, grid=GRID, forward_fusion=True), gyro_window=0.0)
     params, static = eqx.partition(model, eqx.is_inexact_array)
@@ -175,5 +175,7 @@ def test_forward_fusion_gradients_match_finite_differences(float64, level_drive)
     grads = eqx.filter_jit(jax.grad(loss))(params)
     forward = set(map(id, jax.tree_util.tree_leaves(params.forward)))
     skip = [leaf for leaf in jax.tree_util.tree_leaves(params) if id(leaf) not in forward]
-    assert check_leaf_gradients(eqx.filter_jit(loss), grads, params, abs_tol=1e-7, skip=skip) == 2
-    assert abs(float(grads.forward.log_accel_std)) > 0 and abs(float(grads.forward.log_displacement_std)) > 0
+    assert check_leaf_gradients(eqx.filter_jit(loss), grads, params, abs_tol=1e-7, skip=skip) == 3
+    assert all(
+        abs(float(g)) > 0 for g in (grads.forward.log_accel_std, grads.forward.log_displacement_std, grads.forward.log_bias_walk)
+    )

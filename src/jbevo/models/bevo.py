@@ -76,7 +76,7 @@ from jbevo.inertial.kinematics import (
     valid_mean,
 )
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
-from jbevo.models.forward_fusion import COLD_SPEED_STD, WARM_SPEED_STD, ForwardFusion
+from jbevo.models.forward_fusion import BIAS_STD, COLD_SPEED_STD, WARM_SPEED_STD, ForwardFusion
 from jbevo.models.parameters import num_learnable
 from jbevo.models.road_tilt import RoadTilt
 from jbevo.models.yaw_fusion import YawFusion
@@ -265,7 +265,8 @@ class Bevo(eqx.Module):
         keyframe = Keyframe(
             jnp.zeros(self.grid.shape if self._keyframes else (0, 0), dtype), zero, jnp.zeros((), jnp.int32), zero
         )
-        forward = ForwardFusion.initial(attitude.speed, WARM_SPEED_STD if warm_start else COLD_SPEED_STD, dtype)
+        bias_std = BIAS_STD if self.forward is None else self.forward.bias_std
+        forward = ForwardFusion.initial(attitude.speed, WARM_SPEED_STD if warm_start else COLD_SPEED_STD, dtype, bias_std)
         carry = BevoCarry(attitude, jnp.zeros(self.grid.shape, dtype), jnp.asarray(initial_pose, dtype), tilt, keyframe, forward)
         frames = Frame(seq.images, seq.gyro, seq.accel, seq.pitch_roll, jnp.arange(seq.images.shape[0]))
         return carry, frames, seq

@@ -5,21 +5,29 @@ On the real KITTI runs BEVO's per-frame motion error is almost all along the hea
 markings and kerbs run along the motion and fix the lateral shift, little in a street's ground
 texture fixes the forward one. The accelerometer measures exactly that axis's change of speed.
 
-:class:`ForwardFusion` is a linear Kalman filter over ``(speed, travel)``: the forward speed
-(m/s) and the distance travelled since the previous frame (m). Within a frame each IMU sample
-moves the speed by ``a dt`` with ``a = f_x + g sin(pitch)`` (the specific force's forward axis
-and gravity's share at the body's pitch, positive nose down, as :mod:`jbevo.inertial.speed_aided`
-models it) and the travel by ``speed dt + a dt^2 / 2``; the speed walks by ``accel_std`` m/s^2
-per sample (accelerometer noise, vibration and the pitch error's gravity share). DPC's forward increment measures the travel
-with a standard deviation of ``displacement_std`` times the increment (at least
-``displacement_floor`` metres), Cauchy-like robust (the variance grows with the squared innovation,
-as :meth:`jbevo.inertial.speed_aided.SpeedAidedAttitude.update_speed` does), and the posterior
-travel is the frame's forward motion. At the start of each frame the travel is reset to zero.
+:class:`ForwardFusion` is a linear Kalman filter over ``(speed, travel, bias)``: the forward speed
+(m/s), the distance travelled since the previous frame (m) and the bias of the forward
+acceleration (m/s^2). Within a frame each IMU sample moves the speed by ``(a - bias) dt`` with
+``a = f_x + g sin(pitch)`` (the specific force's forward axis and gravity's share at the body's
+pitch, positive nose down, as :mod:`jbevo.inertial.speed_aided` models it) and the travel by
+``speed dt + (a - bias) dt^2 / 2``; the speed walks by ``accel_std`` m/s^2 per sample
+(accelerometer noise and vibration). The bias is what the accelerometer's own bias and the
+attitude filter's pitch error (0.1 deg of pitch is 0.017 m/s^2 of gravity's share) add to the
+forward acceleration; both change slowly, so it walks by ``bias_walk`` m/s^2 per square root of
+a second. Without it a pitch error integrates into the speed until DPC's increments, which the
+filter trusts little against an accelerometer it takes as unbiased, are rejected as gross.
+
+DPC's forward increment measures the travel with a standard deviation of ``displacement_std``
+times the increment (at least ``displacement_floor`` metres), Cauchy-like robust (the variance
+grows with the squared innovation, as :meth:`jbevo.inertial.speed_aided.SpeedAidedAttitude.update_speed`
+does), and the posterior travel is the frame's forward motion. At the start of each frame the
+travel is reset to zero.
 
 The attitude filter keeps its own speed state and DPC's raw increment (its pitch coupling is
 unchanged); this filter only replaces the forward component of the output increment. Hand-set:
 ``accel_std`` 0.05 m/s^2, ``displacement_std`` 5 % (a few centimetres per frame at a metre per
-frame); both learnable.
+frame), ``bias_walk`` :data:`BIAS_WALK` from :data:`BIAS_STD` at the start; all three
+learnable.
 
 Example::
 
@@ -28,8 +36,8 @@ Example::
     >>> state = fusion.initial(jnp.float32(10.0), 0.1, jnp.float32)
     >>> accel = jnp.zeros((10, 3), jnp.float32).at[:, 0].set(1.0)  # 10 samples at 1 m/s^2
     >>> state = fusion.predict(state, accel, jnp.float32(0.0), 0.01)
-    >>> [round(float(v), 3) for v in state.mean]  # from 10 m/s
-    [10.1, 1.005]
+    >>> [round(float(v), 3) for v in state.mean]  # from 10 m/s, no bias yet
+    [10.1, 1.005, 0.0]
 """
 
 from __future__ import annotations
@@ -44,7 +52,7 @@ from jbevo.inertial.kinematics import fill_missing, forward_acceleration
 
 #: The measurement row of the travel (a tuple: no JAX array at import, which would start the
 #: backend before a multi-process job can join).
-_TRAVEL = (0.0, 1.0)
+_TRAVEL = (0.0, 1.0, 0.0)
 
 #: The speed's walk (m/s^2) over a missing IMU sample, which is filled with the block's mean (or
 #: zero when the whole block is missing): about a car's range of acceleration.
@@ -54,6 +62,15 @@ MISSING_ACCEL_STD = 3.0
 #: from none (a cold start: the car may already be moving; the accelerometer cannot tell).
 WARM_SPEED_STD, COLD_SPEED_STD = 0.1, 5.0
 
+#: The forward acceleration's bias's prior standard deviation (m/s^2), warm or cold: about
+#: gravity's share of a 0.6 deg pitch error.
+BIAS_STD = 0.1
+
+#: The bias's hand-set random walk (m/s^2 per square root of a second): chosen among 0.005, 0.02
+#: and 0.05 on the street world's KITTI 00 and 08 drives (``benchmarks/forward_fusion.py``'s
+#: ``bias_walk_sweep``), none of them a drive or run scored with it.
+BIAS_WALK = 0.05
+
 
 class ForwardFusion(eqx.Module):
     """The forward speed and travel filter's noise (learnable) and the measurement floor (static).
@@ -61,27 +78,41 @@ class ForwardFusion(eqx.Module):
     Attributes:
         log_accel_std: log of the speed's walk per IMU sample, m/s^2.
         log_displacement_std: log of DPC's forward increment's relative standard deviation.
+        log_bias_walk: log of the bias's random walk, m/s^2 per square root of a second.
         displacement_floor: metres; the smallest increment the relative noise scales with.
+        bias_std: the bias's prior standard deviation, m/s^2 (:data:`BIAS_STD`; 0 with a
+            negligible walk: a filter without the bias state).
     """
 
     log_accel_std: Float[Array, ""]
     log_displacement_std: Float[Array, ""]
+    log_bias_walk: Float[Array, ""]
     displacement_floor: float = eqx.field(static=True, default=0.05)
+    bias_std: float = eqx.field(static=True, default=BIAS_STD)
 
     @classmethod
-    def create(cls, accel_std: float = 0.05, displacement_std: float = 0.05, displacement_floor: float = 0.05) -> ForwardFusion:
-        if not (accel_std > 0 and displacement_std > 0 and displacement_floor > 0):
+    def create(
+        cls,
+        accel_std: float = 0.05,
+        displacement_std: float = 0.05,
+        bias_walk: float = BIAS_WALK,
+        displacement_floor: float = 0.05,
+        bias_std: float = BIAS_STD,
+    ) -> ForwardFusion:
+        if not (accel_std > 0 and displacement_std > 0 and bias_walk > 0 and displacement_floor > 0 and bias_std >= 0):
             raise ValueError(
-                f"accel_std, displacement_std and displacement_floor must be positive, got {accel_std}, "
-                f"{displacement_std}, {displacement_floor}"
+                f"accel_std, displacement_std, bias_walk and displacement_floor must be positive and bias_std not "
+                f"negative, got {accel_std}, {displacement_std}, {bias_walk}, {displacement_floor}, {bias_std}"
             )
-        return cls(jnp.log(jnp.float32(accel_std)), jnp.log(jnp.float32(displacement_std)), float(displacement_floor))
+        log = lambda v: jnp.log(jnp.float32(v))
+        return cls(log(accel_std), log(displacement_std), log(bias_walk), float(displacement_floor), float(bias_std))
 
     @staticmethod
-    def initial(speed: Float[Array, ""], speed_std: float, dtype) -> ukf.GaussianState:
-        """Speed ``speed``, ``speed_std`` uncertain; no travel yet."""
-        mean = jnp.stack([jnp.asarray(speed, dtype), jnp.zeros((), dtype)])
-        return ukf.GaussianState(mean, jnp.diag(jnp.asarray([speed_std**2, 0.0], dtype)))
+    def initial(speed: Float[Array, ""], speed_std: float, dtype, bias_std: float = BIAS_STD) -> ukf.GaussianState:
+        """Speed ``speed``, ``speed_std`` uncertain; no travel yet; no bias, ``bias_std``
+        uncertain."""
+        mean = jnp.stack([jnp.asarray(speed, dtype), jnp.zeros((), dtype), jnp.zeros((), dtype)])
+        return ukf.GaussianState(mean, jnp.diag(jnp.asarray([speed_std**2, 0.0, bias_std**2], dtype)))
 
     def predict(
         self, state: ukf.GaussianState, accel: Float[Array, "S 3"], pitch: Float[Array, ""], dt: float
@@ -91,21 +122,24 @@ class ForwardFusion(eqx.Module):
         filled with the block's mean, as the attitude filter does, and walks the speed by
         :data:`MISSING_ACCEL_STD` instead of ``accel_std``."""
         dtype = state.mean.dtype
-        speed, speed_var = state.mean[0], state.cov[0, 0]
         missing = jnp.any(jnp.isnan(accel), axis=-1)
         std = jnp.where(missing, MISSING_ACCEL_STD, jnp.exp(self.log_accel_std))
         qs = (std.astype(dtype) * dt) ** 2
+        qb = (jnp.exp(self.log_bias_walk).astype(dtype) ** 2) * dt
         accel = forward_acceleration(fill_missing(accel)[:, 0], pitch).astype(dtype)
+        f = jnp.array([[1.0, 0.0, -dt], [dt, 1.0, -0.5 * dt**2], [0.0, 0.0, 1.0]], dtype)
+        zero = jnp.zeros((), dtype)
 
         def sample(carry, inputs):
             mean, cov = carry
             a, q = inputs
-            f = jnp.array([[1.0, 0.0], [dt, 1.0]], dtype)
-            mean = f @ mean + jnp.stack([a * dt, 0.5 * a * dt**2])  # exact for a constant ``a``
-            cov = f @ cov @ f.T + jnp.diag(jnp.stack([q, jnp.zeros((), dtype)]))
+            mean = f @ mean + jnp.stack([a * dt, 0.5 * a * dt**2, zero])  # exact for a constant ``a``
+            cov = f @ cov @ f.T + jnp.diag(jnp.stack([q, zero, qb]))
             return (mean, cov), None
 
-        start = (jnp.stack([speed, jnp.zeros((), dtype)]), jnp.diag(jnp.stack([speed_var, jnp.zeros((), dtype)])))
+        # The travel restarts at zero: its row and column go, the speed and bias keep theirs.
+        keep = jnp.asarray([1.0, 0.0, 1.0], dtype)
+        start = (state.mean * keep, state.cov * keep[:, None] * keep[None, :])
         (mean, cov), _ = jax.lax.scan(sample, start, (accel, qs))
         return ukf.GaussianState(mean, cov)
 
@@ -129,4 +163,4 @@ class ForwardFusion(eqx.Module):
         return state.mean[1]
 
 
-__all__ = ["COLD_SPEED_STD", "MISSING_ACCEL_STD", "WARM_SPEED_STD", "ForwardFusion"]
+__all__ = ["BIAS_STD", "BIAS_WALK", "COLD_SPEED_STD", "MISSING_ACCEL_STD", "WARM_SPEED_STD", "ForwardFusion"]
