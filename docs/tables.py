@@ -1086,6 +1086,25 @@ def forward_fusion_bias_sweep() -> str:
     return table(header, rows)
 
 
+#: The nominal KITTI camera's height (m; ``jbevo.geometry.camera.Camera.kitti``), which the models
+#: project with.
+NOMINAL_CAMERA_HEIGHT = 1.65
+
+
+def kitti_street_scale() -> str:
+    """The street preset's distance ratio on the street world's KITTI 09 and 10 (the forward-fusion
+    record's long drives), beside the scale that the street world's camera height error alone
+    gives a BEV projected at the nominal height."""
+    long = record(FORWARD_FUSION)["kitti_street"]
+    ratios = " and ".join(f"{long[d]['street + robust bands']['distance_ratio']:.3f} on {d}" for d in ("09", "10"))
+    error = record(STREET_WORLD)["settings"]["street"]["height_error"]
+    nominal = NOMINAL_CAMERA_HEIGHT
+    return (
+        f"{ratios}; the camera sits {100 * error:.0f} cm above its nominal {nominal} m, which alone scales the BEV's "
+        f"motion by {nominal / (nominal + error):.3f}"
+    )
+
+
 def real_kitti_keyframes_speed() -> str:
     speed = record(REAL_KITTI)["frames_per_s"]
     ratios = [v["street + robust bands, keyframes"] / v["street + robust bands"] for v in speed.values()]
@@ -1320,5 +1339,6 @@ VALUES: dict[str, Callable[[], str]] = {
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
     "street_world_zero_shot_steps": street_world_zero_shot_steps,
     "real_kitti_keyframes_speed": real_kitti_keyframes_speed,
+    "kitti_street_scale": kitti_street_scale,
     "street_world_minutes": street_world_minutes,
 }
