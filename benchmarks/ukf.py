@@ -54,17 +54,18 @@ P0 = np.diag([1.0, 1.0, 0.1]) ** 2
 # --------------------------------------------------------------------------------- jbevo
 
 
-def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1, one_kernel: bool = True):
-    """jbevo's filter (``form``: :mod:`ukf` or :mod:`sqrt_ukf`), optionally followed by the RTS
-    smoother, its loops in blocks of ``block`` steps (1: one ``lax.scan``, ``"auto"``):
-    ``run(x0, increments, fixes) -> (means, covariances or factors)``."""
+def make_filter(check_inputs: bool = True, form=ukf, block=1, one_kernel: bool = True):
+    """jbevo's filter (``form``: :mod:`ukf` or :mod:`sqrt_ukf`) on the benchmark's model, its loop
+    in blocks of ``block`` steps (1: one ``lax.scan``, ``"auto"``): ``run(x0, increments, fixes)
+    -> FilterResult``."""
     model = planar_pose_model()
     scheme = MerweScaled(ALPHA, BETA, KAPPA)
 
     def run(x0, increments, fixes):
-        res = form.filter(
+        prior = ukf.GaussianState(x0, jnp.asarray(P0))
+        return form.filter(
             model,
-            ukf.GaussianState(x0, jnp.asarray(P0)),
+            prior,
             increments,
             fixes,
             jnp.asarray(Q),
@@ -74,7 +75,19 @@ def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1, on
             block=block,
             one_kernel=one_kernel,
         )
+
+    return run
+
+
+def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1, one_kernel: bool = True):
+    """:func:`make_filter`'s filter, optionally followed by the RTS smoother:
+    ``run(x0, increments, fixes) -> (means, covariances or factors)``."""
+    run_filter = make_filter(check_inputs, form, block, one_kernel)
+
+    def run(x0, increments, fixes):
+        res = run_filter(x0, increments, fixes)
         if smoothed:
+            model, scheme = planar_pose_model(), MerweScaled(ALPHA, BETA, KAPPA)
             sm = smoother.smooth(model, res, increments, jnp.asarray(Q), scheme=scheme, block=block, one_kernel=one_kernel)
             return sm.smoothed_mean, sm.smoothed_cov
         return res[0], res[1]
@@ -85,26 +98,8 @@ def make_jbevo(check_inputs: bool, form=ukf, smoothed: bool = False, block=1, on
 def make_log_likelihood(block=1, one_kernel: bool = True, check_inputs: bool = True):
     """The covariance filter's log-likelihood of one sequence, ``(x0, increments, fixes) ->
     scalar``, its loop in blocks of ``block`` steps."""
-    model = planar_pose_model()
-    scheme = MerweScaled(ALPHA, BETA, KAPPA)
-
-    def log_likelihood(x0, increments, fixes):
-        prior = ukf.GaussianState(x0, jnp.asarray(P0))
-        res = ukf.filter(
-            model,
-            prior,
-            increments,
-            fixes,
-            jnp.asarray(Q),
-            jnp.asarray(R),
-            scheme=scheme,
-            block=block,
-            one_kernel=one_kernel,
-            check_inputs=check_inputs,
-        )
-        return res.log_likelihood
-
-    return log_likelihood
+    run_filter = make_filter(check_inputs, ukf, block, one_kernel)
+    return lambda x0, increments, fixes: run_filter(x0, increments, fixes).log_likelihood
 
 
 def make_grad(block, one_kernel: bool = True):
