@@ -119,7 +119,7 @@ class BevoCarry(NamedTuple):
     pose: Float[Array, " 3"]  #: the planar pose (x, y, yaw)
     road_tilt: GaussianState  #: the road's tilt along the heading (level and unused without ``road_tilt``)
     keyframe: Keyframe  #: the bands' keyframe (unused without keyframes)
-    forward: GaussianState  #: the forward speed and travel (unused without ``forward``)
+    forward: GaussianState  #: the forward speed, travel and acceleration bias (unused without ``forward``)
 
 
 class Observation(NamedTuple):
@@ -133,7 +133,7 @@ class Observation(NamedTuple):
     confidence: Float[Array, ""]  #: DPC's confidence (0 at frame 0)
     gyro_turn: Float[Array, ""]  #: the gyro's yaw increment over the frame (radians)
     keyframe: Bool[Array, ""]  #: this frame becomes the bands' keyframe (with keyframes)
-    forward: GaussianState  #: the forward speed and travel after the frame's update (with ``forward``)
+    forward: GaussianState  #: the forward speed, travel and acceleration bias after the frame's update (with ``forward``)
 
 
 class BevoOutput(NamedTuple):

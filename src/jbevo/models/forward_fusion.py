@@ -73,7 +73,8 @@ BIAS_WALK = 0.05
 
 
 class ForwardFusion(eqx.Module):
-    """The forward speed and travel filter's noise (learnable) and the measurement floor (static).
+    """The forward speed, travel and bias filter's noise (learnable), the measurement floor and the
+    bias's prior (static).
 
     Attributes:
         log_accel_std: log of the speed's walk per IMU sample, m/s^2.
