@@ -24,6 +24,14 @@ def block(forward, samples=10):
     return jnp.asarray(accel)
 
 
+def bias_share(fusion, samples=10):
+    """The bias's share of the speed's variance after a block: its prior over the block and its
+    walk after each sample (the walk after sample k reaches the speed through the ``samples - k``
+    samples after it)."""
+    walk = float(jnp.exp(fusion.log_bias_walk)) ** 2 * DT
+    return (samples * DT * BIAS_STD) ** 2 + walk * DT**2 * sum(j**2 for j in range(samples))
+
+
 def test_a_block_is_integrated_exactly():
     fusion = ForwardFusion.create(accel_std=0.1)
     state = fusion.initial(jnp.float64(12.0), WARM_SPEED_STD, jnp.float64)
@@ -31,11 +39,9 @@ def test_a_block_is_integrated_exactly():
     speeds = 12.0 + DT * np.cumsum(np.r_[0.0, np.linspace(-1.0, 2.0, 10)])  # before and after each sample
     travel = DT * np.sum(0.5 * (speeds[1:] + speeds[:-1]))
     np.testing.assert_allclose(moved.mean, [speeds[-1], travel, 0.0], rtol=1e-12, atol=1e-15)
-    # The speed's variance grows by the walk per sample, the bias's prior over the block and its
-    # walk after each sample (the walk after sample k reaches the speed through the 10 - k
-    # samples after it); the travel's by the speed's over the block.
-    walk = float(jnp.exp(fusion.log_bias_walk)) ** 2 * DT
-    expected = WARM_SPEED_STD**2 + (10 * DT * BIAS_STD) ** 2 + 10 * (0.1 * DT) ** 2 + walk * DT**2 * sum(j**2 for j in range(10))
+    # The speed's variance grows by the accelerometer's noise per sample and the bias's share; the
+    # travel's by the speed's over the block.
+    expected = WARM_SPEED_STD**2 + 10 * (0.1 * DT) ** 2 + bias_share(fusion)
     assert float(moved.cov[0, 0]) == pytest.approx(expected, rel=1e-9)
     assert float(moved.cov[1, 1]) == pytest.approx((10 * DT * WARM_SPEED_STD) ** 2, rel=0.01)
     # A bias in the state is taken off every sample.
@@ -64,8 +70,8 @@ def test_gravity_share_and_missing_samples():
     # A block with no sample: gravity's share alone, and the speed grows uncertain.
     dead = fusion.predict(state, jnp.full((10, 3), jnp.nan), jnp.float64(pitch), DT)
     assert float(dead.mean[0]) == pytest.approx(5.0 + 10 * DT * GRAVITY * np.sin(pitch), rel=1e-12)
-    bias = (10 * DT * BIAS_STD) ** 2 + float(jnp.exp(fusion.log_bias_walk)) ** 2 * DT**3 * sum(j**2 for j in range(10))
-    assert float(dead.cov[0, 0]) == pytest.approx(WARM_SPEED_STD**2 + 10 * (MISSING_ACCEL_STD * DT) ** 2 + bias, rel=1e-9)
+    expected = WARM_SPEED_STD**2 + 10 * (MISSING_ACCEL_STD * DT) ** 2 + bias_share(fusion)
+    assert float(dead.cov[0, 0]) == pytest.approx(expected, rel=1e-9)
 
 
 def test_the_travel_restarts_every_frame():
