@@ -60,6 +60,9 @@ def test_noise_follows_the_preset_and_the_seed():
     assert np.std(a.accel - [0, 0, GRAVITY]) == pytest.approx(2e-2 * 10.0, rel=0.03)
     with pytest.raises(ValueError, match="body_poses must have shape"):
         simulate_imu(t, poses[:-1])
+    with pytest.raises(ValueError, match="smoothing spline needs at least 5 poses, got 4"):
+        simulate_imu(t[:4], poses[:4])
+    assert simulate_imu(t[:4], poses[:4], smoothing=None).gyro.shape[0] > 0  # interpolating: no minimum
 
 
 def test_the_biases_are_returned_as_added():

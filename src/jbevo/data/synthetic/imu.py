@@ -64,6 +64,10 @@ class ImuData(NamedTuple):
     accel_bias: np.ndarray  # (M, 3) the bias the accelerometer carries (turn-on + random walk)
 
 
+#: The fewest poses a smoothing spline is fitted through (scipy's ``make_smoothing_spline``).
+SMOOTHING_MIN_POSES = 5
+
+
 def simulate_imu(
     frame_times: np.ndarray,
     body_poses: np.ndarray,
@@ -88,6 +92,11 @@ def simulate_imu(
         raise ValueError(f"body_poses must have shape ({len(frame_times)}, 4, 4), got {body_poses.shape}")
     if np.any(np.diff(frame_times) <= 0):
         raise ValueError("frame_times must increase")
+    if smoothing is not None and len(frame_times) < SMOOTHING_MIN_POSES:
+        raise ValueError(
+            f"the smoothing spline needs at least {SMOOTHING_MIN_POSES} poses, got {len(frame_times)} "
+            "(a sequence of at least 4 frames, or smoothing=None)"
+        )
     euler = euler_zyx(body_poses[:, :3, :3])
     euler[:, 0] = np.unwrap(euler[:, 0])
     pos = _spline(frame_times, body_poses[:, :3, 3], smoothing)
