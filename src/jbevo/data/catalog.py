@@ -8,7 +8,7 @@ from pathlib import Path
 
 from jbevo.data.sequence import Sequence
 from jbevo.data.synthetic.sequences import builtin_dataset, kitti_sequence, small_camera
-from jbevo.data.synthetic.street import street_named
+from jbevo.data.synthetic.street import Street, street_named
 from jbevo.data.synthetic.world import World
 from jbevo.geometry.camera import Camera
 from jbevo.progress import progress
@@ -27,7 +27,7 @@ def load_sequences(
     seed: int = 0,
     kitti_imu: Path | None = None,
     positions: list[int] | None = None,
-    world: str = "flat",
+    world: str | Street | None = "flat",
 ) -> list[Sequence]:
     """The sequences ``names`` of ``dataset``. For ``synthetic``, ``names`` are seeds (one
     procedural drive each, ``frames`` frames); for ``kitti-synthetic`` KITTI sequence names whose
@@ -37,9 +37,10 @@ def load_sequences(
     :func:`jbevo.data.synthetic.sequences.kitti_sequence`; the drive at place ``i`` of the list is
     rendered with seed ``seed + i``, or ``seed + positions[i]`` where ``names`` is a share of a
     longer list); for ``kitti`` sequence names under ``kitti_root``. ``world`` is the synthetic
-    world's kind (``flat`` or ``street``: :mod:`jbevo.data.synthetic.street`). ``ValueError``
-    names what is missing."""
-    street = street_named(world)
+    world's kind (``flat`` or ``street``: :mod:`jbevo.data.synthetic.street`) or its
+    :class:`~jbevo.data.synthetic.street.Street` settings (``None``: flat). ``ValueError`` names
+    what is missing."""
+    street = street_named(world) if isinstance(world, str) else world
     if dataset == "synthetic":
         return [builtin_dataset(frames, 1, town, int(n), street)[0] for n in progress(names, "rendering synthetic drives")]
     if dataset == "kitti-synthetic":
