@@ -43,6 +43,7 @@ import numpy as np
 
 from jbevo.data.catalog import load_sequences
 from jbevo.data.synthetic.sequences import synthetic_copy
+from jbevo.data.synthetic.street import Street
 from jbevo.data.synthetic.world import World
 from jbevo.eval.batch import run_many
 from jbevo.eval.devkit import SEGMENT_LENGTHS
@@ -128,20 +129,29 @@ def sweep_models(imu_dt: float) -> dict[str, Bevo]:
     return models | walks
 
 
-def long_drives(reference: Path, names, frames: int, seed: int, make_models, devkit: bool) -> dict[str, dict]:
-    """The models ``make_models(imu_dt)`` (label -> model) on the street world's KITTI drives
-    ``names``: the metrics of ``real_kitti.scores`` per drive, with ``devkit`` also the devkit's
+def long_drives(
+    reference: Path,
+    names,
+    frames: int,
+    seed: int,
+    make_models,
+    devkit: bool,
+    street: Street | None = STREET,
+    extra=lambda out, seq: {},
+) -> dict[str, dict]:
+    """The models ``make_models(imu_dt)`` (label -> model) on the KITTI drives ``names`` rendered
+    in the world of ``street`` (the street world by default): the metrics of ``real_kitti.scores``
+    per drive and those ``extra(output, sequence)`` returns, with ``devkit`` also the devkit's
     t_err and r_err per drive and pooled."""
     seqs = load_sequences(
-        "kitti-synthetic", list(names), frames, reference / "kitti_odom" / "gt_poses", camera="kitti", seed=seed, world="street"
+        "kitti-synthetic", list(names), frames, reference / "kitti_odom" / "gt_poses", camera="kitti", seed=seed, world=street
     )
     table: dict[str, dict] = {}
     for label, model in make_models(seqs[0].imu_dt).items():
         outs, _ = run_many(model, seqs, warm_start=True)
         for name, out, seq in zip(names, outs, seqs):
-            row = scores(out.increments, out.pitch_roll, seq, 0, seq.num_frames) | along_across(
-                out.increments, seq, 0, seq.num_frames
-            )
+            row = scores(out.increments, out.pitch_roll, seq, 0, seq.num_frames)
+            row |= along_across(out.increments, seq, 0, seq.num_frames) | extra(out, seq)
             if devkit:
                 row |= {k: score(out, seq, SEGMENT_LENGTHS)[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
             table.setdefault(name, {})[label] = row
