@@ -1092,7 +1092,8 @@ STREET_DRIVES = "benchmarks/results/street_drives.json"
 def street_drives() -> str:
     """The street preset on the street world's KITTI 09 and 10 with one failure mode removed at a
     time: the devkit's errors, the whole-drive distance ratio and the spread of the 100 m pieces'."""
-    d = record(STREET_DRIVES)["drives"]
+    rec = record(STREET_DRIVES)
+    d, piece = rec["drives"], f"{rec['settings']['piece_m']:.0f} m"
     drives = [name for name in d if name != "pooled"]
     rows = []
     for world, pooled in d["pooled"].items():
@@ -1101,7 +1102,7 @@ def street_drives() -> str:
         cells += [f"{num(d[name][world]['distance_ratio'], 3)} / {num(d[name][world]['piece_scale_std'], 3)}" for name in drives]
         rows.append([world] + cells)
     header = ["world"] + [f"{name} t_err (%)" for name in drives] + ["pooled t_err (%)", "pooled r_err (deg/100 m)"]
-    header += [f"{name}: distance ratio / 100 m pieces' spread" for name in drives]
+    header += [f"{name}: distance ratio / {piece} pieces' spread" for name in drives]
     return table(header, rows)
 
 
