@@ -1106,6 +1106,32 @@ def street_drives() -> str:
     return table(header, rows)
 
 
+STREET_ORACLE = "benchmarks/results/street_oracle.json"
+
+
+def street_oracle() -> str:
+    """The street preset, the preset with the camera's mounting known and the odometry at the true
+    attitude against the road, on KITTI 09 and 10 in the street and the flat world."""
+    rec = record(STREET_ORACLE)
+    d, piece = rec["drives"], f"{rec['settings']['piece_m']:.0f} m"
+    drives = [name for name in d if name != "pooled"]
+    rows = []
+    # The street world first; in each world the preset's rows, then the exact projection's.
+    for world, models in sorted(d["pooled"].items(), key=lambda item: item[0] != "street world"):
+        for model, pooled in sorted(models.items(), key=lambda item: item[0].startswith("odometry")):
+            cells = [num(d[name][world][model]["t_err_pct"], 2) for name in drives]
+            cells += [num(pooled["t_err_pct"], 2), num(pooled["r_err_deg_per_100m"], 2)]
+            cells += [
+                f"{num(d[name][world][model]['distance_ratio'], 3)} / {num(d[name][world][model]['piece_scale_std'], 3)}"
+                f" / {num(d[name][world][model]['along_cm'], 1)}"
+                for name in drives
+            ]
+            rows.append([f"{world}: {model}"] + cells)
+    header = ["world: model"] + [f"{name} t_err (%)" for name in drives] + ["pooled t_err (%)", "pooled r_err (deg/100 m)"]
+    header += [f"{name}: distance ratio / {piece} pieces' spread / along the heading (cm)" for name in drives]
+    return table(header, rows)
+
+
 def kitti_street_scale() -> str:
     """The street preset's distance ratios on the street world's KITTI 09 and 10, with the camera
     mounted as the street world mounts it and as nominal."""
@@ -1284,6 +1310,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "forward_fusion_long": forward_fusion_long,
     "forward_fusion_bias_sweep": forward_fusion_bias_sweep,
     "street_drives": street_drives,
+    "street_oracle": street_oracle,
     "parallel_in_time": parallel_in_time,
     "batch_last": batch_last,
     "attitude_synthetic": attitude_synthetic,

@@ -19,6 +19,8 @@ python benchmarks/attitude_real.py
 python benchmarks/real_kitti.py
 python benchmarks/street_world.py
 python benchmarks/forward_fusion.py
+python benchmarks/street_drives.py
+python benchmarks/street_oracle.py
 python experiments/filtering_demo.py
 python experiments/reference_metrics.py
 python experiments/bands.py

@@ -1,0 +1,146 @@
+"""What bounds the street world's KITTI-style error: the street preset's attitude against the road,
+or what DPC makes of the street's images once the projection is exact.
+
+The KITTI-style experiment's test drives (KITTI 09 and 10 whole, the motion of their pose files,
+simulated IMU, rendered with seed ``LONG_SEED`` as ``benchmarks/street_drives.py`` renders them) in
+the street world and the flat world, hand-set, warm start, on the KITTI-style grid:
+
+* ``street + robust bands``: the street preset (:func:`jbevo.models.presets.street_model`);
+* ``street + robust bands, mounting known``: the same with its road view set to the world's camera
+  mounting (pitch, roll and height), which the hand-set preset does not know (street world only:
+  the flat world's camera is the nominal one);
+* ``odometry at the true attitude against the road``: the preset's odometry without bands (road
+  view with the mounting known, yaw fusion, DPC) projected at the truth's pitch and roll less the
+  road's grade and banking under each frame, as the world rendered them
+  (:func:`jbevo.data.synthetic.street.street_tilt`), its attitude filter warm-started from the
+  truth against gravity as the others' (its gyro bias estimate sets the gyro's turn): the error
+  that is left when the projection is exact.
+
+Scored as ``benchmarks/street_drives.py`` scores (the KITTI devkit's t_err and r_err over
+100-800 m segments, per drive and pooled, the metrics of ``real_kitti.scores`` and
+``forward_fusion.along_across``, and the distance ratio's spread over 100 m pieces). Nothing is
+fitted. Keys: ``drives[<drive>][<world>][<model>][<metric>]``, ``<drive>`` 09, 10 or pooled.
+
+    JBEVO_REFERENCE_DATA=../shared/data python benchmarks/street_oracle.py [--frames N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import time
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from forward_fusion import KITTI_GRID, LONG_DRIVES, LONG_SEED, along_across
+from jbevo.data.catalog import load_sequences
+from jbevo.data.pose_files import read_kitti
+from jbevo.data.sequence import Sequence
+from jbevo.data.synthetic.street import STREET, Street, street_tilt
+from jbevo.data.synthetic.trajectories import kitti_drive
+from jbevo.eval.batch import run_many
+from jbevo.eval.devkit import SEGMENT_LENGTHS
+from jbevo.eval.scores import score
+from jbevo.files import write_json_atomic
+from jbevo.geometry.camera import Camera
+from jbevo.models import Bevo, BevoOutput
+from jbevo.models.presets import street_model
+from jbevo.vision.road_view import RoadView
+from real_kitti import RESULTS, scores
+from street_drives import PIECE_M, spread
+
+WORLDS: dict[str, Street | None] = {"street world": STREET, "flat world": None}
+PRESET = "street + robust bands"
+KNOWN = "street + robust bands, mounting known"
+ORACLE = "odometry at the true attitude against the road"
+
+
+def mounting(street: Street | None) -> RoadView:
+    """The road view of the camera as ``street`` mounts it (the nominal camera on the flat world)."""
+    if street is None:
+        return RoadView.create()
+    nominal = float(Camera.kitti().height)
+    return RoadView.create(
+        float(np.radians(street.mount_pitch_deg)),
+        float(np.radians(street.mount_roll_deg)),
+        (nominal + street.height_error) / nominal,
+    )
+
+
+def against_road(seq: Sequence, kitti_poses: np.ndarray, street: Street | None, seed: int) -> np.ndarray:
+    """The pitch and roll against the road, ``(T, 2)``, of ``seq`` (rendered by ``load_sequences``
+    from ``kitti_poses`` with ``seed`` in the world of ``street``): its truth's less the road's
+    grade and banking under each frame, the attitude the images were rendered at less the
+    mounting."""
+    truth = np.asarray(seq.pitch_roll, float)
+    if street is None:
+        return truth
+    _, level = kitti_drive(kitti_poses)
+    return truth - street_tilt(street, None, level[: seq.num_frames + 1], seed)[1:]
+
+
+@eqx.filter_jit
+def run_on_road(model: Bevo, seq: Sequence, pitch_roll: Array) -> BevoOutput:
+    """``model`` (``attitude_source="truth"``) over ``seq``, warm-started from the truth against
+    gravity, with each frame's BEV projected at ``pitch_roll`` instead of the truth's."""
+    carry, frames, seq = model.start(seq, warm_start=True)
+    frames = frames._replace(true_pitch_roll=pitch_roll.astype(frames.true_pitch_roll.dtype))
+    frame_dt = model.frame_dt(seq)
+    return jax.lax.scan(lambda c, f: model.step(c, f, seq.camera, frame_dt), carry, frames)[1]
+
+
+def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
+    preset = street_model(imu_dt, KITTI_GRID, bands=True)
+    odometry = street_model(imu_dt, KITTI_GRID, bands=False)
+    oracle = dataclasses.replace(odometry, attitude_source="truth", road=mounting(street))
+    if street is None:  # the preset's road view is the flat world's nominal camera already
+        return {PRESET: preset, ORACLE: oracle}
+    return {PRESET: preset, KNOWN: dataclasses.replace(preset, road=mounting(street)), ORACLE: oracle}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--frames", type=int, default=0, help="frames per drive (0: all)")
+    parser.add_argument("--out", type=Path, default=RESULTS / "street_oracle.json")
+    args = parser.parse_args()
+    root = os.environ.get("JBEVO_REFERENCE_DATA")
+    if not root or not (Path(root) / "kitti_odom" / "gt_poses").is_dir():
+        raise SystemExit("set JBEVO_REFERENCE_DATA to the reference data folder (with kitti_odom/gt_poses/)")
+    gt = Path(root) / "kitti_odom" / "gt_poses"
+    started = time.time()
+    drives: dict[str, dict] = {}
+    for world, street in WORLDS.items():
+        seqs = load_sequences("kitti-synthetic", list(LONG_DRIVES), args.frames, gt, camera="kitti", seed=LONG_SEED, world=street)
+        # load_sequences renders the drive at place i with seed LONG_SEED + i.
+        road = [
+            against_road(seq, read_kitti(gt / f"{name}.txt").poses, street, LONG_SEED + i)
+            for i, (name, seq) in enumerate(zip(LONG_DRIVES, seqs))
+        ]
+        for label, model in models(seqs[0].imu_dt, street).items():
+            if label == ORACLE:
+                outs = [run_on_road(model, seq, jnp.asarray(pr)) for seq, pr in zip(seqs, road)]
+            else:
+                outs, _ = run_many(model, seqs, warm_start=True)
+            for name, out, seq in zip(LONG_DRIVES, outs, seqs):
+                # The oracle's attitude is against the road, not gravity: no pitch/roll error.
+                row = scores(out.increments, None if label == ORACLE else out.pitch_roll, seq, 0, seq.num_frames)
+                row |= along_across(out.increments, seq, 0, seq.num_frames) | spread(out, seq)
+                row |= {k: score(out, seq, SEGMENT_LENGTHS)[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
+                drives.setdefault(name, {}).setdefault(world, {})[label] = row
+                print(f"{world} {name} {label}: t_err {row['t_err_pct']:.2f} %, ratio {row['distance_ratio']:.3f}", flush=True)
+            pooled = score(outs, seqs, SEGMENT_LENGTHS)
+            drives.setdefault("pooled", {}).setdefault(world, {})[label] = {
+                k: pooled[k] for k in ("t_err_pct", "r_err_deg_per_100m")
+            }
+    settings = {"drives": list(LONG_DRIVES), "seed": LONG_SEED, "frames": args.frames, "piece_m": PIECE_M}
+    write_json_atomic(args.out, {"drives": drives, "settings": settings, "seconds": time.time() - started})
+
+
+if __name__ == "__main__":
+    main()
