@@ -18,8 +18,9 @@ the street world and the flat world, hand-set, warm start, on the KITTI-style gr
 
 Scored as ``benchmarks/street_drives.py`` scores (the KITTI devkit's t_err and r_err over
 100-800 m segments, per drive and pooled, the metrics of ``real_kitti.scores`` and
-``forward_fusion.along_across``, and the distance ratio's spread over 100 m pieces). Nothing is
-fitted. Keys: ``drives[<drive>][<world>][<model>][<metric>]``, ``<drive>`` 09, 10 or pooled.
+``forward_fusion.along_across``, and the distance ratio's spread over 100 m pieces), and how far
+the camera attitude each BEV was projected with is from the true one against the road (its
+pitch's mean and RMS, its roll's RMS; zero for the oracle by construction). Nothing is fitted. Keys: ``drives[<drive>][<world>][<model>][<metric>]``, ``<drive>`` 09, 10 or pooled.
 
     JBEVO_REFERENCE_DATA=../shared/data python benchmarks/street_oracle.py [--frames N]
 """
@@ -95,6 +96,21 @@ def run_on_road(model: Bevo, seq: Sequence, pitch_roll: Array) -> BevoOutput:
     return jax.lax.scan(lambda c, f: model.step(c, f, seq.camera, frame_dt), carry, frames)[1]
 
 
+def projection_error(out: BevoOutput, model: Bevo, road: np.ndarray, street: Street | None) -> dict[str, float]:
+    """How far the camera attitude each BEV was projected with is from the true one against the
+    road (``road`` plus the mounting; degrees): its pitch's mean and RMS, its roll's RMS."""
+    view, true_view = model.road or RoadView.create(), mounting(street)
+    pitch = np.asarray(out.pitch_roll, float)[:, 0] + np.asarray(out.road_tilt, float) + float(view.pitch)
+    roll = np.asarray(out.pitch_roll, float)[:, 1] + float(view.roll)
+    pitch_error = np.degrees(pitch - road[:, 0] - float(true_view.pitch))
+    roll_error = np.degrees(roll - road[:, 1] - float(true_view.roll))
+    return {
+        "projection_pitch_mean_deg": float(pitch_error.mean()),
+        "projection_pitch_rmse_deg": float(np.sqrt(np.mean(pitch_error**2))),
+        "projection_roll_rmse_deg": float(np.sqrt(np.mean(roll_error**2))),
+    }
+
+
 def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
     preset = street_model(imu_dt, KITTI_GRID, bands=True)
     odometry = street_model(imu_dt, KITTI_GRID, bands=False)
@@ -127,10 +143,11 @@ def main() -> None:
                 outs = [run_on_road(model, seq, jnp.asarray(pr)) for seq, pr in zip(seqs, road)]
             else:
                 outs, _ = run_many(model, seqs, warm_start=True)
-            for name, out, seq in zip(LONG_DRIVES, outs, seqs):
+            for name, out, seq, pitch_roll in zip(LONG_DRIVES, outs, seqs, road):
                 # The oracle's attitude is against the road, not gravity: no pitch/roll error.
                 row = scores(out.increments, None if label == ORACLE else out.pitch_roll, seq, 0, seq.num_frames)
                 row |= along_across(out.increments, seq, 0, seq.num_frames) | spread(out, seq)
+                row |= projection_error(out, model, pitch_roll, street)
                 row |= {k: score(out, seq, SEGMENT_LENGTHS)[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
                 drives.setdefault(name, {}).setdefault(world, {})[label] = row
                 print(f"{world} {name} {label}: t_err {row['t_err_pct']:.2f} %, ratio {row['distance_ratio']:.3f}", flush=True)

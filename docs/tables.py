@@ -1132,6 +1132,30 @@ def street_oracle() -> str:
     return table(header, rows)
 
 
+def street_oracle_projection() -> str:
+    """How far the street preset's projection is from the true camera attitude against the road,
+    on KITTI 09 and 10 in the street and the flat world."""
+    d = record(STREET_ORACLE)["drives"]
+    drives = [name for name in d if name != "pooled"]
+    rows = []
+    for world, models in sorted(d[drives[0]].items(), key=lambda item: item[0] != "street world"):
+        for model in models:
+            if model.startswith("odometry"):
+                continue  # zero by construction
+            rows.append(
+                [f"{world}: {model}"]
+                + [
+                    " / ".join(
+                        num(d[name][world][model][k], 2)
+                        for k in ("projection_pitch_mean_deg", "projection_pitch_rmse_deg", "projection_roll_rmse_deg")
+                    )
+                    for name in drives
+                ]
+            )
+    header = ["world: model"] + [f"{name}: pitch mean / pitch RMS / roll RMS (deg)" for name in drives]
+    return table(header, rows)
+
+
 def kitti_street_scale() -> str:
     """The street preset's distance ratios on the street world's KITTI 09 and 10, with the camera
     mounted as the street world mounts it and as nominal."""
@@ -1311,6 +1335,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "forward_fusion_bias_sweep": forward_fusion_bias_sweep,
     "street_drives": street_drives,
     "street_oracle": street_oracle,
+    "street_oracle_projection": street_oracle_projection,
     "parallel_in_time": parallel_in_time,
     "batch_last": batch_last,
     "attitude_synthetic": attitude_synthetic,

@@ -164,9 +164,15 @@ def test_bands_find_the_road_tilt_and_leave_the_gravity_pitch_alone(tilted_view)
     robust = Bevo.create(grid, tilted_view.imu_dt, n_angles=256)
     robust = dataclasses.replace(robust, bands=BandGeometry.create(robust=True))
     truth = np.asarray(tilted_view.pitch_roll[:, 0])
-    tilt, pitch = _tilt_and_pitch(dataclasses.replace(robust, road_tilt=RoadTilt.create()), tilted_view)
+    with_tilt = dataclasses.replace(robust, road_tilt=RoadTilt.create())
+    tilt, pitch = _tilt_and_pitch(with_tilt, tilted_view)
     assert abs(np.mean(tilt[-8:]) - TILT) < np.radians(0.1)
     assert np.abs(pitch - truth).max() < np.radians(0.01)
+    # The output reports the tilt each frame's BEV was projected with: the previous frame's.
+    out = eqx.filter_jit(lambda m, s: m(s, warm_start=True))(with_tilt, tilted_view)
+    assert float(out.road_tilt[0]) == 0.0
+    np.testing.assert_allclose(out.road_tilt[1:], tilt[:-1], atol=1e-5)
+    assert np.all(np.asarray(eqx.filter_jit(lambda m, s: m(s, warm_start=True))(robust, tilted_view).road_tilt) == 0.0)
     _, pitch = _tilt_and_pitch(robust, tilted_view)
     assert np.all(np.abs(TILT - (pitch[-8:] - truth[-8:])) > np.radians(0.2))
 

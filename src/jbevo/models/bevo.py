@@ -140,9 +140,13 @@ class BevoOutput(NamedTuple):
     """BEVO's output per frame (leading axis ``T``)."""
 
     increments: Float[Array, "T 3"]  #: (dx, dy, dyaw) from frame t-1 to t, body frame of t-1
-    pitch_roll: Float[Array, "T 2"]  #: the attitude each BEV was projected with
+    #: the body's attitude each BEV was projected from (the attitude source's: against gravity for
+    #: the filter), before the road view's camera offsets and the road tilt are added
+    pitch_roll: Float[Array, "T 2"]
     confidence: Float[Array, " T"]  #: DPC confidence (0 for frame 0)
     poses: Float[Array, "T 3"]  #: (x, y, yaw), from the initial pose
+    #: the road tilt added to that pitch for the frame's BEV (radians; 0 without a road tilt state)
+    road_tilt: Float[Array, " T"]
 
 
 class Bevo(eqx.Module):
@@ -453,8 +457,10 @@ class Bevo(eqx.Module):
         """One frame of the recursion: :meth:`observe`, then :meth:`advance`. Returns the new
         carry and this frame's row of :class:`BevoOutput`."""
         observation = self.observe(carry, frame, camera, frame_dt)
+        # The frame's BEV is projected with the tilt's prediction, whose mean is the carry's.
+        tilt = carry.road_tilt.mean[0] if self.road_tilt is not None else jnp.zeros((), carry.road_tilt.mean.dtype)
         carry = self.advance(carry, observation, frame, camera)
-        return carry, BevoOutput(observation.increment, observation.pitch_roll, observation.confidence, carry.pose)
+        return carry, BevoOutput(observation.increment, observation.pitch_roll, observation.confidence, carry.pose, tilt)
 
     def __call__(self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False) -> BevoOutput:
         """Run over an unbatched sequence (``jax.vmap`` for batches). ``initial_pose`` defaults to
