@@ -62,20 +62,28 @@ def spread(out, seq) -> dict[str, float]:
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def drive_arguments(description: str, record: str) -> tuple[argparse.Namespace, Path]:
+    """The command line of a long-drive benchmark (``--frames``, ``--out``, default
+    ``RESULTS / record``) and the reference data's folder (``JBEVO_REFERENCE_DATA``, with
+    ``kitti_odom/gt_poses/``)."""
+    parser = argparse.ArgumentParser(description=description.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=0, help="frames per drive (0: all)")
-    parser.add_argument("--out", type=Path, default=RESULTS / "street_drives.json")
+    parser.add_argument("--out", type=Path, default=RESULTS / record)
     args = parser.parse_args()
     root = os.environ.get("JBEVO_REFERENCE_DATA")
     if not root or not (Path(root) / "kitti_odom" / "gt_poses").is_dir():
         raise SystemExit("set JBEVO_REFERENCE_DATA to the reference data folder (with kitti_odom/gt_poses/)")
+    return args, Path(root)
+
+
+def main() -> None:
+    args, root = drive_arguments(__doc__, "street_drives.json")
     started = time.time()
     drives: dict[str, dict] = {}
     for world, street in ABLATIONS.items():
         print(f"{world}:", flush=True)
         table = long_drives(
-            Path(root),
+            root,
             LONG_DRIVES,
             args.frames,
             LONG_SEED,

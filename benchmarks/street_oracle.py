@@ -27,11 +27,8 @@ pitch's mean and RMS, its roll's RMS; zero for the oracle by construction). Noth
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import os
 import time
-from pathlib import Path
 
 import equinox as eqx
 import jax
@@ -53,8 +50,8 @@ from jbevo.geometry.camera import Camera
 from jbevo.models import Bevo, BevoOutput
 from jbevo.models.presets import street_model
 from jbevo.vision.road_view import RoadView
-from real_kitti import RESULTS, scores
-from street_drives import PIECE_M, spread
+from real_kitti import scores
+from street_drives import PIECE_M, drive_arguments, spread
 
 WORLDS: dict[str, Street | None] = {"street world": STREET, "flat world": None}
 PRESET = "street + robust bands"
@@ -121,14 +118,8 @@ def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--frames", type=int, default=0, help="frames per drive (0: all)")
-    parser.add_argument("--out", type=Path, default=RESULTS / "street_oracle.json")
-    args = parser.parse_args()
-    root = os.environ.get("JBEVO_REFERENCE_DATA")
-    if not root or not (Path(root) / "kitti_odom" / "gt_poses").is_dir():
-        raise SystemExit("set JBEVO_REFERENCE_DATA to the reference data folder (with kitti_odom/gt_poses/)")
-    gt = Path(root) / "kitti_odom" / "gt_poses"
+    args, root = drive_arguments(__doc__, "street_oracle.json")
+    gt = root / "kitti_odom" / "gt_poses"
     started = time.time()
     drives: dict[str, dict] = {}
     for world, street in WORLDS.items():
