@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Regenerate every committed record (benchmarks/results/*.json, experiments/results/*.json), then
 # the measured tables of the README and docs/ from them. Needs the bench extra
-# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about five hours on
+# (pip install -e ".[bench]") and the reference data ($JBEVO_REFERENCE_DATA); about six hours on
 # a 2-core CPU. Timings are of this machine: run nothing else beside it.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."

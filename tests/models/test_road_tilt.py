@@ -177,6 +177,23 @@ def test_bands_find_the_road_tilt_and_leave_the_gravity_pitch_alone(tilted_view)
     assert np.all(np.abs(TILT - (pitch[-8:] - truth[-8:])) > np.radians(0.2))
 
 
+def test_the_output_names_the_tilt_each_bev_was_projected_with(tilted_view):
+    """The BEV that a frame's observation projects is the one at the output's pitch and roll with
+    the output's road tilt added to the pitch, frame after frame while the bands move the tilt."""
+    model = _street_bands(tilted_view, keyframes=False)
+    carry, frames, seq = model.start(tilted_view, warm_start=True)
+    frame_dt = model.frame_dt(seq)
+    observe = jax.jit(lambda c, f: model.observe(c, f, seq.camera, frame_dt))
+    step = jax.jit(lambda c, f: model.step(c, f, seq.camera, frame_dt))
+    bev = jax.jit(lambda image, pitch_roll: model.bev(image, pitch_roll, seq.camera))
+    for t in range(6):
+        frame = jax.tree_util.tree_map(lambda a, t=t: a[t], frames)
+        projected = observe(carry, frame).bev
+        carry, out = step(carry, frame)
+        np.testing.assert_allclose(bev(frame.image, out.pitch_roll.at[0].add(out.road_tilt)), projected, atol=1e-4)
+    assert abs(float(out.road_tilt)) > np.radians(0.05)
+
+
 def _street_bands(seq, keyframes, robust=True):
     """The real-street bands (robust, engaged from 1 m, road tilt) on the tilted drive's grid."""
     model = Bevo.create(BevGrid(0.1, (256, 256), near=4.0), seq.imu_dt, n_angles=256, road_tilt=True)
