@@ -25,7 +25,8 @@ Scored as ``benchmarks/street_drives.py`` scores (the KITTI devkit's t_err and r
 100-800 m segments, per drive and pooled, the metrics of ``real_kitti.scores`` and
 ``forward_fusion.along_across``, and the distance ratio's spread over 100 m pieces), and how far
 the camera attitude each BEV was projected with is from the true one against the road (its
-pitch's mean and RMS, its roll's RMS; zero for the oracle by construction). Nothing is fitted. Keys: ``drives[<drive>][<world>][<model>][<metric>]``, ``<drive>`` 09, 10 or pooled.
+pitch's mean and RMS, its roll's RMS; zero for the oracle by construction). Nothing is fitted.
+Keys: ``drives[<drive>][<world>][<model>][<metric>]``, ``<drive>`` 09, 10 or pooled.
 
     JBEVO_REFERENCE_DATA=../shared/data python benchmarks/street_oracle.py [--frames N]
 """

@@ -24,6 +24,7 @@ from jbevo.geometry.euler import poses_from_euler
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 from jbevo.models.bevo import Bevo
 from jbevo.models.road_tilt import RoadTilt
+from jbevo.models.runners import run_bevo
 from jbevo.vision.bands import BandGeometry, SlopeMeasurement
 
 TILT = np.radians(0.4)
@@ -169,10 +170,10 @@ def test_bands_find_the_road_tilt_and_leave_the_gravity_pitch_alone(tilted_view)
     assert abs(np.mean(tilt[-8:]) - TILT) < np.radians(0.1)
     assert np.abs(pitch - truth).max() < np.radians(0.01)
     # The output reports the tilt each frame's BEV was projected with: the previous frame's.
-    out = eqx.filter_jit(lambda m, s: m(s, warm_start=True))(with_tilt, tilted_view)
+    out = run_bevo(with_tilt, tilted_view, warm_start=True)
     assert float(out.road_tilt[0]) == 0.0
     np.testing.assert_allclose(out.road_tilt[1:], tilt[:-1], atol=1e-5)
-    assert np.all(np.asarray(eqx.filter_jit(lambda m, s: m(s, warm_start=True))(robust, tilted_view).road_tilt) == 0.0)
+    assert np.all(np.asarray(run_bevo(robust, tilted_view, warm_start=True).road_tilt) == 0.0)
     _, pitch = _tilt_and_pitch(robust, tilted_view)
     assert np.all(np.abs(TILT - (pitch[-8:] - truth[-8:])) > np.radians(0.2))
 
