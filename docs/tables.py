@@ -1109,24 +1109,35 @@ def street_drives() -> str:
 STREET_ORACLE = "benchmarks/results/street_oracle.json"
 
 
+def street_oracle_rows(drives: dict) -> list[tuple[str, str]]:
+    """The (world, model) rows of ``street_oracle.json``'s ``drives``: the street world first, and
+    in each world the preset's rows before the bandless odometry's."""
+    worlds = sorted(drives["pooled"], key=lambda world: world != "street world")
+    return [
+        (world, model)
+        for world in worlds
+        for model in sorted(drives["pooled"][world], key=lambda model: model.startswith("odometry"))
+    ]
+
+
 def street_oracle() -> str:
-    """The street preset, the preset with the camera's mounting known and the odometry at the true
-    attitude against the road, on KITTI 09 and 10 in the street and the flat world."""
+    """The street preset, the preset with the camera's mounting known, and its odometry without
+    bands at the preset's and at the true attitude against the road, on KITTI 09 and 10 in the
+    street and the flat world."""
     rec = record(STREET_ORACLE)
     d, piece = rec["drives"], f"{rec['settings']['piece_m']:.0f} m"
     drives = [name for name in d if name != "pooled"]
     rows = []
-    # The street world first; in each world the preset's rows, then the exact projection's.
-    for world, models in sorted(d["pooled"].items(), key=lambda item: item[0] != "street world"):
-        for model, pooled in sorted(models.items(), key=lambda item: item[0].startswith("odometry")):
-            cells = [num(d[name][world][model]["t_err_pct"], 2) for name in drives]
-            cells += [num(pooled["t_err_pct"], 2), num(pooled["r_err_deg_per_100m"], 2)]
-            cells += [
-                f"{num(d[name][world][model]['distance_ratio'], 3)} / {num(d[name][world][model]['piece_scale_std'], 3)}"
-                f" / {num(d[name][world][model]['along_cm'], 1)}"
-                for name in drives
-            ]
-            rows.append([f"{world}: {model}"] + cells)
+    for world, model in street_oracle_rows(d):
+        pooled = d["pooled"][world][model]
+        cells = [num(d[name][world][model]["t_err_pct"], 2) for name in drives]
+        cells += [num(pooled["t_err_pct"], 2), num(pooled["r_err_deg_per_100m"], 2)]
+        cells += [
+            f"{num(d[name][world][model]['distance_ratio'], 3)} / {num(d[name][world][model]['piece_scale_std'], 3)}"
+            f" / {num(d[name][world][model]['along_cm'], 1)}"
+            for name in drives
+        ]
+        rows.append([f"{world}: {model}"] + cells)
     header = ["world: model"] + [f"{name} t_err (%)" for name in drives] + ["pooled t_err (%)", "pooled r_err (deg/100 m)"]
     header += [f"{name}: distance ratio / {piece} pieces' spread / along the heading (cm)" for name in drives]
     return table(header, rows)
@@ -1134,24 +1145,16 @@ def street_oracle() -> str:
 
 def street_oracle_projection() -> str:
     """How far the street preset's projection is from the true camera attitude against the road,
-    on KITTI 09 and 10 in the street and the flat world."""
+    on KITTI 09 and 10 in the street and the flat world (the bandless odometry's rows, projected at
+    a given attitude, left out)."""
     d = record(STREET_ORACLE)["drives"]
     drives = [name for name in d if name != "pooled"]
-    rows = []
-    for world, models in sorted(d[drives[0]].items(), key=lambda item: item[0] != "street world"):
-        for model in models:
-            if model.startswith("odometry"):
-                continue  # zero by construction
-            rows.append(
-                [f"{world}: {model}"]
-                + [
-                    " / ".join(
-                        num(d[name][world][model][k], 2)
-                        for k in ("projection_pitch_mean_deg", "projection_pitch_rmse_deg", "projection_roll_rmse_deg")
-                    )
-                    for name in drives
-                ]
-            )
+    keys = ("projection_pitch_mean_deg", "projection_pitch_rmse_deg", "projection_roll_rmse_deg")
+    rows = [
+        [f"{world}: {model}"] + [" / ".join(num(d[name][world][model][k], 2) for k in keys) for name in drives]
+        for world, model in street_oracle_rows(d)
+        if not model.startswith("odometry")
+    ]
     header = ["world: model"] + [f"{name}: pitch mean / pitch RMS / roll RMS (deg)" for name in drives]
     return table(header, rows)
 
