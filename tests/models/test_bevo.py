@@ -97,13 +97,17 @@ def test_gradient_of_the_loss_matches_finite_differences(float64, world):
     assert checked == 14
 
 
-def test_street_model_gradients_match_finite_differences(float64, world):
+@pytest.mark.parametrize("level_road", [False, True])
+def test_street_model_gradients_match_finite_differences(float64, world, level_road):
     """The real-street configuration: road view, yaw fusion, road tilt, robust bands (their 8
-    leaves, DPC's 6 and the band pair through them), float64 on the small camera; the attitude
+    leaves, DPC's 6 and the band pair through them), float64 on the small camera, with the tilt
+    added to the filter's pitch and on a level road (the tilt the BEV's only pitch); the attitude
     filter's leaves are checked by the test above."""
     seq = procedural_sequence(3, 5, camera=CAMERA, world=world)
     # The bands at any speed (the travel gate is a step: its kinks are not what this checks).
-    model = dataclasses.replace(street_model(seq.imu_dt, grid=GRID, bands_min_travel=0.0), gyro_window=0.0)
+    model = street_model(seq.imu_dt, grid=GRID, bands_min_travel=0.0, level_road=level_road)
+    model = dataclasses.replace(model, gyro_window=0.0)
+    assert model.road_tilt is not None and model.road_tilt.level == level_road
     assert model.num_learnable() == 14 + 2 + 4 + 1 + 1
     assert model.bands is not None and model.bands.robust
     params, static = eqx.partition(model, eqx.is_inexact_array)

@@ -23,6 +23,7 @@ from jbevo.geometry.camera import FORWARD, Camera, level_to_body
 from jbevo.geometry.euler import poses_from_euler
 from jbevo.inertial.speed_aided import AttitudeState, SpeedAidedAttitude
 from jbevo.models.bevo import Bevo
+from jbevo.models.presets import street_model
 from jbevo.models.road_tilt import RoadTilt
 from jbevo.models.runners import run_bevo
 from jbevo.vision.bands import BandGeometry, SlopeMeasurement
@@ -116,10 +117,13 @@ def test_gradient_of_the_speed_update(float64):
     assert float(grad_sens) == pytest.approx(float(fd_sens), rel=1e-6)
 
 
-def _tilted_drive(world, step, n, tilt=TILT):
-    """A level straight drive at ``step`` metres per frame (noiseless IMU) whose KITTI camera is
-    mounted ``tilt`` radians nose down (default :data:`TILT`, 0.4 deg), read back with the level
-    camera: to the model, a road falling by ``tilt``."""
+def _tilted_drive(world, step, n, tilt=TILT, body_pitch=0.0):
+    """A straight drive at ``step`` metres per frame (noiseless IMU), the body pitched
+    ``body_pitch`` radians nose down against gravity, whose KITTI camera is mounted ``tilt``
+    radians nose down against the body (default :data:`TILT`, 0.4 deg), read back with the
+    nominal camera: to the model, a road falling by ``tilt``. With ``tilt = -body_pitch`` the
+    camera looks at the level ground as the nominal one on a level body: a grade that the IMU
+    sees and the camera's view of the road does not."""
     nominal = Camera.kitti()
     mounted = eqx.tree_at(
         lambda c: c.rotation_body_to_camera,
@@ -127,7 +131,9 @@ def _tilted_drive(world, step, n, tilt=TILT):
         jnp.asarray(FORWARD, jnp.float32) @ level_to_body(jnp.float32(tilt), jnp.float32(0.0)).T,
     )
     x = 20.0 + step * np.arange(n)
-    poses = poses_from_euler(np.zeros((n, 3)), np.stack([x, np.full(n, 30.0), np.full(n, 1.65)], -1))
+    euler = np.zeros((n, 3))
+    euler[:, 1] = body_pitch
+    poses = poses_from_euler(euler, np.stack([x, np.full(n, 30.0), np.full(n, 1.65)], -1))
     seq = make_sequence(world, mounted, np.arange(n) * 0.1, poses, "day", NOISELESS, smoothing=None)
     return eqx.tree_at(lambda s: s.camera, seq, nominal)
 
@@ -192,6 +198,7 @@ def test_the_output_names_the_tilt_each_bev_was_projected_with(tilted_view):
         projected = observe(carry, frame).bev
         carry, out = step(carry, frame)
         np.testing.assert_allclose(bev(frame.image, out.pitch_roll.at[0].add(out.road_tilt)), projected, atol=1e-4)
+        np.testing.assert_allclose(out.projection, out.pitch_roll.at[0].add(out.road_tilt), atol=1e-7)
     assert abs(float(out.road_tilt)) > np.radians(0.05)
 
 
@@ -199,6 +206,47 @@ def _street_bands(seq, keyframes, robust=True):
     """The real-street bands (robust, engaged from 1 m, road tilt) on the tilted drive's grid."""
     model = Bevo.create(BevGrid(0.1, (256, 256), near=4.0), seq.imu_dt, n_angles=256, road_tilt=True)
     return dataclasses.replace(model, bands=BandGeometry.create(robust=robust, min_travel=1.0, keyframes=keyframes))
+
+
+GRADE = np.radians(0.6)
+
+
+def test_a_level_road_projects_on_the_road_whatever_the_grade(world):
+    """A 0.6 deg grade that the IMU sees while the camera's view of the road is the nominal one:
+    on a level road the BEV's pitch is the tilt alone (its roll zero) and stays within 0.1 deg of
+    the road from the first frame, while the filter keeps the pitch against gravity to 0.01 deg;
+    the tilt added to the filter's pitch projects the first two BEVs a grade off, and the bands
+    bring it within 0.1 deg by the 16th. Each observation's BEV is the one at the output's
+    ``projection``."""
+    with pytest.raises(ValueError, match="level_road needs bands"):
+        street_model(0.01, bands=False, level_road=True)
+    graded = _tilted_drive(world, 1.2, 16, tilt=-GRADE, body_pitch=GRADE)
+    truth = np.asarray(graded.pitch_roll[:, 0])
+    assert np.allclose(truth, GRADE, atol=1e-4)
+    gravity_tilt = _street_bands(graded, keyframes=False)
+    assert gravity_tilt.road_tilt is not None
+    level = dataclasses.replace(gravity_tilt, road_tilt=dataclasses.replace(gravity_tilt.road_tilt, level=True))
+    out = run_bevo(level, graded, warm_start=True)
+    projection = np.asarray(out.projection)
+    np.testing.assert_array_equal(projection[:, 0], np.asarray(out.road_tilt))
+    assert np.all(projection[:, 1] == 0.0)
+    assert np.abs(projection[:, 0]).max() < np.radians(0.1)
+    assert np.abs(np.asarray(out.pitch_roll[:, 0]) - truth).max() < np.radians(0.01)
+    added = run_bevo(gravity_tilt, graded, warm_start=True)
+    np.testing.assert_allclose(added.projection[:, 0], added.pitch_roll[:, 0] + added.road_tilt, atol=1e-7)
+    np.testing.assert_array_equal(added.projection[:, 1], added.pitch_roll[:, 1])
+    assert np.all(np.abs(np.asarray(added.projection[:2, 0]) - GRADE) < np.radians(0.02))
+    assert abs(float(added.projection[-1, 0])) < np.radians(0.1)
+    carry, frames, seq = level.start(graded, warm_start=True)
+    frame_dt = level.frame_dt(seq)
+    observe = jax.jit(lambda c, f: level.observe(c, f, seq.camera, frame_dt))
+    step = jax.jit(lambda c, f: level.step(c, f, seq.camera, frame_dt))
+    bev = jax.jit(lambda image, pitch_roll: level.bev(image, pitch_roll, seq.camera))
+    for t in range(4):
+        frame = jax.tree_util.tree_map(lambda a, t=t: a[t], frames)
+        projected = observe(carry, frame).bev
+        carry, row = step(carry, frame)
+        np.testing.assert_allclose(bev(frame.image, row.projection), projected, atol=1e-4)
 
 
 def test_keyframes_find_the_road_tilt_below_the_travel_gate(world):

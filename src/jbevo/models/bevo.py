@@ -140,13 +140,17 @@ class BevoOutput(NamedTuple):
     """BEVO's output per frame (leading axis ``T``)."""
 
     increments: Float[Array, "T 3"]  #: (dx, dy, dyaw) from frame t-1 to t, body frame of t-1
-    #: the body's attitude each BEV was projected from (the attitude source's: against gravity for
-    #: the filter), before the road view's camera offsets and the road tilt are added
+    #: the attitude source's pitch and roll at each frame's BEV (the filter's prediction: against
+    #: gravity), before the road view's camera offsets and the road tilt
     pitch_roll: Float[Array, "T 2"]
     confidence: Float[Array, " T"]  #: DPC confidence (0 for frame 0)
     poses: Float[Array, "T 3"]  #: (x, y, yaw), from the initial pose
-    #: the road tilt added to that pitch for the frame's BEV (radians; 0 without a road tilt state)
+    #: the road tilt state's mean that the frame's BEV was projected with (radians; 0 without one)
     road_tilt: Float[Array, " T"]
+    #: the pitch and roll each BEV was projected with, before the road view's camera offsets:
+    #: ``pitch_roll`` with ``road_tilt`` added to the pitch, or on a level road
+    #: (:attr:`jbevo.models.road_tilt.RoadTilt.level`) ``(road_tilt, 0)``
+    projection: Float[Array, "T 2"]
 
 
 class Bevo(eqx.Module):
@@ -175,9 +179,9 @@ class Bevo(eqx.Module):
             rotation averaged with the gyro's yaw increment by inverse variance.
         road_tilt: :class:`jbevo.models.road_tilt.RoadTilt`, or None (off): with bands and the
             filter's attitude, the bands' slope updates the road's tilt (added to the pitch the
-            BEV is projected with) instead of the filter's pitch against gravity, and the
-            odometry's speed updates the tilt and the filter's speed together
-            (:meth:`jbevo.models.road_tilt.RoadTilt.update_with_speed`).
+            BEV is projected with, or on a level road the pitch itself) instead of the filter's
+            pitch against gravity, and the odometry's speed updates the tilt and the filter's
+            speed together (:meth:`jbevo.models.road_tilt.RoadTilt.update_with_speed`).
         forward: :class:`jbevo.models.forward_fusion.ForwardFusion`, or None (off): the forward
             motion per frame from the accelerometer's speed and DPC's increment together (the
             attitude filter still takes DPC's own).
@@ -299,7 +303,7 @@ class Bevo(eqx.Module):
     # ------------------------------------------------------------------ one frame
 
     def projection_attitude(self, belief: AttitudeState, frame: Frame) -> Float[Array, " 2"]:
-        """The pitch and roll this frame's BEV is projected with (``attitude_source``)."""
+        """The attitude source's pitch and roll for this frame's BEV (before any road tilt)."""
         dtype = belief.mean.dtype
         if self.attitude_source == "filter":
             return belief.pitch_roll
@@ -322,6 +326,11 @@ class Bevo(eqx.Module):
     def camera_height(self, camera: Camera, dtype) -> Float[Array, ""]:
         """The camera's height above the road the BEV assumes (metres)."""
         return jnp.asarray(camera.height if self.road is None else self.road.height(camera), dtype)
+
+    @property
+    def _level_road(self) -> bool:
+        """Whether the BEV is projected on the road's plane whatever the filter's attitude."""
+        return self.road_tilt is not None and self.road_tilt.level
 
     @property
     def _keyframes(self) -> bool:
@@ -406,10 +415,14 @@ class Bevo(eqx.Module):
         return Observation(belief, tilt, pitch_roll, bev, increment, confidence, gyro_turn.astype(bev.dtype), keyframe, forward)
 
     def _on_road(self, pitch_roll: Float[Array, " 2"], tilt: GaussianState) -> Float[Array, " 2"]:
-        """The body's ``pitch_roll`` with the road's tilt added to the pitch (with ``road_tilt``)."""
+        """The attitude a BEV is projected with: the body's ``pitch_roll``, with ``road_tilt`` its
+        pitch plus the road's tilt, or on a level road the tilt and no roll."""
         if self.road_tilt is None:
             return pitch_roll
-        return pitch_roll.at[0].add(tilt.mean[0].astype(pitch_roll.dtype))
+        pitch = tilt.mean[0].astype(pitch_roll.dtype)
+        if self.road_tilt.level:
+            return jnp.stack([pitch, jnp.zeros_like(pitch)])
+        return pitch_roll.at[0].add(pitch)
 
     def advance(
         self,
@@ -438,7 +451,7 @@ class Bevo(eqx.Module):
             # accumulate until the next keyframe, whose BEV, projected again, has them.
             reset = observation.keyframe
             correction = jnp.zeros((), bev.dtype)
-            if self.attitude_source == "filter":
+            if self.attitude_source == "filter" and not self._level_road:
                 correction = (attitude.pitch_roll[0] - observation.pitch_roll[0]).astype(bev.dtype)
                 correction = jnp.where(reset & reproject, 0.0, correction)
             keyframe = Keyframe(
@@ -459,8 +472,11 @@ class Bevo(eqx.Module):
         observation = self.observe(carry, frame, camera, frame_dt)
         # The frame's BEV is projected with the tilt's prediction, whose mean is the carry's.
         tilt = carry.road_tilt.mean[0] if self.road_tilt is not None else jnp.zeros((), carry.road_tilt.mean.dtype)
+        projection = self._on_road(observation.pitch_roll, carry.road_tilt)
         carry = self.advance(carry, observation, frame, camera)
-        return carry, BevoOutput(observation.increment, observation.pitch_roll, observation.confidence, carry.pose, tilt)
+        return carry, BevoOutput(
+            observation.increment, observation.pitch_roll, observation.confidence, carry.pose, tilt, projection
+        )
 
     def __call__(self, seq: Sequence, initial_pose: Float[Array, " 3"] | None = None, warm_start: bool = False) -> BevoOutput:
         """Run over an unbatched sequence (``jax.vmap`` for batches). ``initial_pose`` defaults to

@@ -27,6 +27,15 @@ tilt where the tilt is uncertain and the speed where the speed is. An underestim
 no longer holds the bands below their gate (on the street world's KITTI 08 it did, for 300
 frames).
 
+**Level road** (``level``, static). The BEV is projected on the road's plane whatever the filter
+says: its pitch is the tilt state alone and its roll zero (both on top of the road view's camera
+offsets), so the state is the camera's pitch against the road beyond the road view's, not the
+grade, and changes only with the car's load and suspension. The filter's attitude against gravity
+still serves the IMU (the speed state, the gyro's turn). The grade then never enters the BEV, and
+the tilt's walk can be small (:data:`jbevo.models.presets.LEVEL_ROAD_WALK`), but the suspension's
+pitch and roll against the road, which the filter's attitude carries, are lost to it. Where it
+holds and where it does not: ``benchmarks/street_oracle.py``, ``benchmarks/real_kitti.py``.
+
 Example::
 
     >>> import jax.numpy as jnp
@@ -53,16 +62,18 @@ class RoadTilt(eqx.Module):
     Attributes:
         log_walk_std: log of ``q``, radians per square-root metre travelled.
         initial_std: the prior's standard deviation (radians; static, hand-set 0.5 deg).
+        level: static; the BEV's pitch is the tilt alone and its roll zero (module docstring).
     """
 
     log_walk_std: Float[Array, ""]
     initial_std: float = eqx.field(static=True, default=0.0087)
+    level: bool = eqx.field(static=True, default=False)
 
     @classmethod
-    def create(cls, walk_std: float = 0.0025, initial_std: float = 0.0087) -> RoadTilt:
+    def create(cls, walk_std: float = 0.0025, initial_std: float = 0.0087, level: bool = False) -> RoadTilt:
         if not (walk_std > 0 and initial_std > 0):
             raise ValueError(f"walk_std and initial_std must be positive, got {walk_std}, {initial_std}")
-        return cls(jnp.log(jnp.float32(walk_std)), float(initial_std))
+        return cls(jnp.log(jnp.float32(walk_std)), float(initial_std), bool(level))
 
     def initial(self, dtype) -> ukf.GaussianState:
         """A level road, ``initial_std`` uncertain."""
