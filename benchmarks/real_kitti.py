@@ -17,7 +17,9 @@ the gyro's turn fused with DPC's; where named, robust bands engaged from 1 m per
 measure the road's tilt) with the filter's, the true (levelled) or a zero attitude; the band
 rows also without the road tilt (the slope then corrects the pitch against gravity), engaged
 from 0.5 m per frame or at any speed, and with keyframes (the band pair is the current BEV and
-the last one at which the bands engaged; they engage once the travel since reaches 1 m). Learned rows fit on one half of a run and are scored on the other
+the last one at which the bands engaged; they engage once the travel since reaches 1 m), and
+projected on a level road (``level road``: the BEV's pitch the bands' tilt alone, its roll zero;
+:attr:`jbevo.models.road_tilt.RoadTilt.level`). Learned rows fit on one half of a run and are scored on the other
 (both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
 ``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
 ``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11),
@@ -203,6 +205,7 @@ def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, bool]]:
         "BEVO, true attitude": (dataclasses.replace(plain, attitude_source="truth"), True),
         "street": (street, True),
         "street + robust bands": (street_model(imu_dt, bands=True), True),
+        "street + robust bands, level road": (street_model(imu_dt, bands=True, level_road=True), True),
         "street + robust bands, no road tilt": (dataclasses.replace(street_model(imu_dt, bands=True), road_tilt=None), True),
         "street + robust bands, from 0.5 m per frame": (street_model(imu_dt, bands=True, bands_min_travel=0.5), True),
         "street + robust bands, keyframes": (street_model(imu_dt, bands=True, bands_keyframes=True), True),

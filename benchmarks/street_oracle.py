@@ -9,6 +9,9 @@ the street world and the flat world, hand-set, warm start, on the KITTI-style gr
 * ``street + robust bands, mounting known``: the same with its road view set to the world's camera
   mounting (pitch, roll and height), which the hand-set preset does not know (street world only:
   the flat world's camera is the nominal one);
+* ``street + robust bands, level road``: the preset with its BEV projected on the road's plane,
+  the bands' tilt its only pitch (``street_model(..., level_road=True)``,
+  :attr:`jbevo.models.road_tilt.RoadTilt.level`), hand-set, its mounting unknown;
 * ``odometry at the preset's attitude``: the preset's odometry without bands (road view, yaw
   fusion, DPC) projected at the attitude the preset projected each frame's BEV with (its filter's
   pitch plus its road tilt, and its roll): the control for the next row, which differs from it in
@@ -62,6 +65,7 @@ from street_drives import PIECE_M, drive_arguments, spread
 WORLDS: dict[str, Street | None] = {"street world": STREET, "flat world": None}
 PRESET = "street + robust bands"
 KNOWN = "street + robust bands, mounting known"
+LEVEL = "street + robust bands, level road"
 REPLAY = "odometry at the preset's attitude"
 ORACLE = "odometry at the true attitude against the road"
 
@@ -106,8 +110,8 @@ def projection_error(out: BevoOutput, model: Bevo, road: np.ndarray, street: Str
     With bands, the BEV is projected once more at the updated attitude before the next frame's
     registration (``Bevo.advance``); that projection is not scored."""
     view, true_view = model.road or RoadView.create(), mounting(street)
-    pitch = np.asarray(out.pitch_roll, float)[:, 0] + np.asarray(out.road_tilt, float) + float(view.pitch)
-    roll = np.asarray(out.pitch_roll, float)[:, 1] + float(view.roll)
+    pitch = np.asarray(out.projection, float)[:, 0] + float(view.pitch)
+    roll = np.asarray(out.projection, float)[:, 1] + float(view.roll)
     pitch_error = np.degrees(pitch - road[:, 0] - float(true_view.pitch))
     roll_error = np.degrees(roll - road[:, 1] - float(true_view.roll))
     return {
@@ -117,19 +121,13 @@ def projection_error(out: BevoOutput, model: Bevo, road: np.ndarray, street: Str
     }
 
 
-def projected(out: BevoOutput) -> np.ndarray:
-    """The body's pitch and roll each BEV of ``out`` was projected from, the road tilt added."""
-    pitch_roll = np.array(out.pitch_roll, float)
-    pitch_roll[:, 0] += np.asarray(out.road_tilt, float)
-    return pitch_roll
-
-
 def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
     preset = street_model(imu_dt, KITTI_GRID, bands=True)
     odometry = dataclasses.replace(street_model(imu_dt, KITTI_GRID, bands=False), attitude_source="truth")
     out = {PRESET: preset}
     if street is not None:  # the preset's road view is the flat world's nominal camera already
         out[KNOWN] = dataclasses.replace(preset, road=mounting(street))
+    out[LEVEL] = street_model(imu_dt, KITTI_GRID, bands=True, level_road=True)
     return out | {REPLAY: odometry, ORACLE: dataclasses.replace(odometry, road=mounting(street))}
 
 
@@ -147,7 +145,7 @@ def main() -> None:
         ]
         outputs: dict[str, list[BevoOutput]] = {}
         for label, model in models(seqs[0].imu_dt, street).items():
-            attitudes = {ORACLE: road, REPLAY: [projected(out) for out in outputs.get(PRESET, [])]}.get(label)
+            attitudes = {ORACLE: road, REPLAY: [np.asarray(out.projection, float) for out in outputs.get(PRESET, [])]}.get(label)
             if attitudes is None:
                 outs, _ = run_many(model, seqs, warm_start=True)
             else:
