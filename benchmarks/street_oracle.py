@@ -22,13 +22,20 @@ the street world and the flat world, hand-set, warm start, on the KITTI-style gr
   (:func:`jbevo.data.synthetic.street.street_tilt`), its attitude filter warm-started from the
   truth against gravity as the others' (its gyro bias estimate sets the gyro's turn): the error
   that is left when the projection's attitude is exact (the camera's height still wanders with
-  the drive's bumps, as in every row).
+  the drive's bumps, as in every row);
+* ``odometry at the true pitch against the road, the preset's roll`` and ``odometry at the
+  preset's pitch, the true roll against the road``: the same odometry with one axis of the
+  camera's attitude the oracle's and the other the preset's (as the preset's road view and
+  projection put it): which of the two the preset's error lies in.
 
 Scored as ``benchmarks/street_drives.py`` scores (the KITTI devkit's t_err and r_err over
 100-800 m segments, per drive and pooled, the metrics of ``real_kitti.scores`` and
 ``forward_fusion.along_across``, and the distance ratio's spread over 100 m pieces), and how far
 the camera attitude each BEV was projected with is from the true one against the road (its
-pitch's mean and RMS, its roll's RMS; zero for the oracle by construction). Nothing is fitted.
+pitch's mean and RMS, its roll's RMS; zero for the oracle by construction) and, for the rows
+whose filter runs, how far the filter's pitch is from the truth's against gravity
+(``filter_pitch_rmse_deg``): the part of the projection's pitch error that is not the road
+tilt's. Nothing is fitted.
 Keys: ``drives[<drive>][<world>][<model>][<metric>]``, ``<drive>`` 09, 10 or pooled.
 
     JBEVO_REFERENCE_DATA=../shared/data python benchmarks/street_oracle.py [--frames N]
@@ -68,6 +75,8 @@ KNOWN = "street + robust bands, mounting known"
 LEVEL = "street + robust bands, level road"
 REPLAY = "odometry at the preset's attitude"
 ORACLE = "odometry at the true attitude against the road"
+TRUE_PITCH = "odometry at the true pitch against the road, the preset's roll"
+TRUE_ROLL = "odometry at the preset's pitch, the true roll against the road"
 
 
 def mounting(street: Street | None) -> RoadView:
@@ -121,6 +130,22 @@ def projection_error(out: BevoOutput, model: Bevo, road: np.ndarray, street: Str
     }
 
 
+def filter_pitch_error(out: BevoOutput, seq: Sequence) -> dict[str, float]:
+    """The RMS of the filter's pitch against the truth's against gravity (degrees)."""
+    error = np.degrees(np.asarray(out.pitch_roll, float)[:, 0] - np.asarray(seq.pitch_roll, float)[:, 0])
+    return {"filter_pitch_rmse_deg": float(np.sqrt(np.mean(error**2)))}
+
+
+def mixed(projection: np.ndarray, road: np.ndarray, preset: Bevo, street: Street | None, true_axis: int) -> np.ndarray:
+    """The body attitude that, under the mounting's road view, projects the camera at the true
+    attitude against the road (``road``) on axis ``true_axis`` (0 pitch, 1 roll) and at the
+    ``preset``'s (its ``projection`` under its own road view) on the other."""
+    view, true_view = preset.road or RoadView.create(), mounting(street)
+    out = np.asarray(projection, float) + np.array([float(view.pitch - true_view.pitch), float(view.roll - true_view.roll)])
+    out[:, true_axis] = road[:, true_axis]
+    return out
+
+
 def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
     preset = street_model(imu_dt, KITTI_GRID, bands=True)
     odometry = dataclasses.replace(street_model(imu_dt, KITTI_GRID, bands=False), attitude_source="truth")
@@ -128,7 +153,8 @@ def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
     if street is not None:  # the preset's road view is the flat world's nominal camera already
         out[KNOWN] = dataclasses.replace(preset, road=mounting(street))
     out[LEVEL] = street_model(imu_dt, KITTI_GRID, bands=True, level_road=True)
-    return out | {REPLAY: odometry, ORACLE: dataclasses.replace(odometry, road=mounting(street))}
+    oracle = dataclasses.replace(odometry, road=mounting(street))
+    return out | {REPLAY: odometry, ORACLE: oracle, TRUE_PITCH: oracle, TRUE_ROLL: oracle}
 
 
 def main() -> None:
@@ -144,8 +170,15 @@ def main() -> None:
             for i, (name, seq) in enumerate(zip(LONG_DRIVES, seqs))
         ]
         outputs: dict[str, list[BevoOutput]] = {}
-        for label, model in models(seqs[0].imu_dt, street).items():
-            attitudes = {ORACLE: road, REPLAY: [np.asarray(out.projection, float) for out in outputs.get(PRESET, [])]}.get(label)
+        candidates = models(seqs[0].imu_dt, street)
+        for label, model in candidates.items():
+            preset = [np.asarray(out.projection, float) for out in outputs.get(PRESET, [])]
+            attitudes = {
+                ORACLE: road,
+                REPLAY: preset,
+                TRUE_PITCH: [mixed(p, r, candidates[PRESET], street, 0) for p, r in zip(preset, road)],
+                TRUE_ROLL: [mixed(p, r, candidates[PRESET], street, 1) for p, r in zip(preset, road)],
+            }.get(label)
             if attitudes is None:
                 outs, _ = run_many(model, seqs, warm_start=True)
             else:
@@ -156,6 +189,8 @@ def main() -> None:
                 row = scores(out.increments, None if attitudes is not None else out.pitch_roll, seq, 0, seq.num_frames)
                 row |= along_across(out.increments, seq, 0, seq.num_frames) | spread(out, seq)
                 row |= projection_error(out, model, pitch_roll, street)
+                if attitudes is None:
+                    row |= filter_pitch_error(out, seq)
                 row |= {k: score(out, seq, SEGMENT_LENGTHS)[k] for k in ("t_err_pct", "r_err_deg_per_100m")}
                 drives.setdefault(name, {}).setdefault(world, {})[label] = row
                 print(f"{world} {name} {label}: t_err {row['t_err_pct']:.2f} %, ratio {row['distance_ratio']:.3f}", flush=True)

@@ -1145,17 +1145,17 @@ def street_oracle() -> str:
 
 def street_oracle_projection() -> str:
     """How far the street preset's projection is from the true camera attitude against the road,
-    on KITTI 09 and 10 in the street and the flat world (the bandless odometry's rows, projected at
-    a given attitude, left out)."""
+    and its filter's pitch from the truth's against gravity, on KITTI 09 and 10 in the street and
+    the flat world (the bandless odometry's rows, projected at a given attitude, left out)."""
     d = record(STREET_ORACLE)["drives"]
     drives = [name for name in d if name != "pooled"]
-    keys = ("projection_pitch_mean_deg", "projection_pitch_rmse_deg", "projection_roll_rmse_deg")
+    keys = ("projection_pitch_mean_deg", "projection_pitch_rmse_deg", "projection_roll_rmse_deg", "filter_pitch_rmse_deg")
     rows = [
         [f"{world}: {model}"] + [" / ".join(num(d[name][world][model][k], 2) for k in keys) for name in drives]
         for world, model in street_oracle_rows(d)
         if not model.startswith("odometry")
     ]
-    header = ["world: model"] + [f"{name}: pitch mean / pitch RMS / roll RMS (deg)" for name in drives]
+    header = ["world: model"] + [f"{name}: pitch mean / pitch RMS / roll RMS / filter's pitch RMS (deg)" for name in drives]
     return table(header, rows)
 
 
