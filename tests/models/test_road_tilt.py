@@ -187,19 +187,30 @@ def test_bands_find_the_road_tilt_and_leave_the_gravity_pitch_alone(tilted_view)
 def test_the_output_names_the_tilt_each_bev_was_projected_with(tilted_view):
     """The BEV that a frame's observation projects is the one at the output's pitch and roll with
     the output's road tilt added to the pitch, frame after frame while the bands move the tilt."""
-    model = _street_bands(tilted_view, keyframes=False)
-    carry, frames, seq = model.start(tilted_view, warm_start=True)
+    rows = _check_observed_bevs(
+        _street_bands(tilted_view, keyframes=False), tilted_view, 6, lambda row: row.pitch_roll.at[0].add(row.road_tilt)
+    )
+    for row in rows:
+        np.testing.assert_allclose(row.projection, row.pitch_roll.at[0].add(row.road_tilt), atol=1e-7)
+    assert abs(float(rows[-1].road_tilt)) > np.radians(0.05)
+
+
+def _check_observed_bevs(model, seq, frames, attitude):
+    """Step ``model`` over the first ``frames`` frames of ``seq``, checking that the BEV each
+    observation projects is the one at ``attitude(output row)``; the output rows."""
+    carry, scanned, seq = model.start(seq, warm_start=True)
     frame_dt = model.frame_dt(seq)
     observe = jax.jit(lambda c, f: model.observe(c, f, seq.camera, frame_dt))
     step = jax.jit(lambda c, f: model.step(c, f, seq.camera, frame_dt))
     bev = jax.jit(lambda image, pitch_roll: model.bev(image, pitch_roll, seq.camera))
-    for t in range(6):
-        frame = jax.tree_util.tree_map(lambda a, t=t: a[t], frames)
+    rows = []
+    for t in range(frames):
+        frame = jax.tree_util.tree_map(lambda a, t=t: a[t], scanned)
         projected = observe(carry, frame).bev
-        carry, out = step(carry, frame)
-        np.testing.assert_allclose(bev(frame.image, out.pitch_roll.at[0].add(out.road_tilt)), projected, atol=1e-4)
-        np.testing.assert_allclose(out.projection, out.pitch_roll.at[0].add(out.road_tilt), atol=1e-7)
-    assert abs(float(out.road_tilt)) > np.radians(0.05)
+        carry, row = step(carry, frame)
+        np.testing.assert_allclose(bev(frame.image, attitude(row)), projected, atol=1e-4)
+        rows.append(row)
+    return rows
 
 
 def _street_bands(seq, keyframes, robust=True):
@@ -237,16 +248,7 @@ def test_a_level_road_projects_on_the_road_whatever_the_grade(world):
     np.testing.assert_array_equal(added.projection[:, 1], added.pitch_roll[:, 1])
     assert np.all(np.abs(np.asarray(added.projection[:2, 0]) - GRADE) < np.radians(0.02))
     assert abs(float(added.projection[-1, 0])) < np.radians(0.1)
-    carry, frames, seq = level.start(graded, warm_start=True)
-    frame_dt = level.frame_dt(seq)
-    observe = jax.jit(lambda c, f: level.observe(c, f, seq.camera, frame_dt))
-    step = jax.jit(lambda c, f: level.step(c, f, seq.camera, frame_dt))
-    bev = jax.jit(lambda image, pitch_roll: level.bev(image, pitch_roll, seq.camera))
-    for t in range(4):
-        frame = jax.tree_util.tree_map(lambda a, t=t: a[t], frames)
-        projected = observe(carry, frame).bev
-        carry, row = step(carry, frame)
-        np.testing.assert_allclose(bev(frame.image, row.projection), projected, atol=1e-4)
+    _check_observed_bevs(level, graded, 4, lambda row: row.projection)
 
 
 def test_keyframes_find_the_road_tilt_below_the_travel_gate(world):
