@@ -169,21 +169,21 @@ def main() -> None:
             against_road(seq, read_kitti(gt / f"{name}.txt").poses, street, LONG_SEED + i)
             for i, (name, seq) in enumerate(zip(LONG_DRIVES, seqs))
         ]
-        outputs: dict[str, list[BevoOutput]] = {}
-        candidates = models(seqs[0].imu_dt, street)
-        for label, model in candidates.items():
-            preset = [np.asarray(out.projection, float) for out in outputs.get(PRESET, [])]
-            attitudes = {
-                ORACLE: road,
-                REPLAY: preset,
-                TRUE_PITCH: [mixed(p, r, candidates[PRESET], street, 0) for p, r in zip(preset, road)],
-                TRUE_ROLL: [mixed(p, r, candidates[PRESET], street, 1) for p, r in zip(preset, road)],
-            }.get(label)
+        # The attitudes each replayed row projects at; the preset's come once it has run (first).
+        replays: dict[str, list[np.ndarray]] = {ORACLE: road}
+        for label, model in models(seqs[0].imu_dt, street).items():
+            attitudes = replays.get(label)
             if attitudes is None:
                 outs, _ = run_many(model, seqs, warm_start=True)
             else:
                 outs = [run_on_road(model, seq, jnp.asarray(pr)) for seq, pr in zip(seqs, attitudes)]
-            outputs[label] = outs
+            if label == PRESET:
+                preset = [np.asarray(out.projection, float) for out in outs]
+                replays |= {
+                    REPLAY: preset,
+                    TRUE_PITCH: [mixed(p, r, model, street, 0) for p, r in zip(preset, road)],
+                    TRUE_ROLL: [mixed(p, r, model, street, 1) for p, r in zip(preset, road)],
+                }
             for name, out, seq, pitch_roll in zip(LONG_DRIVES, outs, seqs, road):
                 # A replayed attitude is not the filter's against gravity: no pitch/roll error.
                 row = scores(out.increments, None if attitudes is not None else out.pitch_roll, seq, 0, seq.num_frames)
