@@ -106,3 +106,24 @@ def test_frames_interpolated_over_a_dropout_are_found():
         kitti.interpolated_frames(stream, 7)
     with pytest.raises(ValueError, match="at least 1"):
         kitti.interpolated_frames(stream, 0)
+
+
+def test_blocks_on_a_dropout_line_are_marked_missing(seq):
+    # Frames 3-5 flagged: the line runs from frame 2 to frame 6, so blocks 3-6 lie on it.
+    flags = np.zeros(seq.num_frames, bool)
+    flags[3:6] = True
+    marked = kitti.without_dropouts(seq, flags)
+    missing = np.isnan(np.asarray(marked.gyro)).all((1, 2)) & np.isnan(np.asarray(marked.accel)).all((1, 2))
+    np.testing.assert_array_equal(np.flatnonzero(missing), [3, 4, 5, 6])
+    kept = ~missing
+    np.testing.assert_array_equal(np.asarray(marked.gyro)[kept], np.asarray(seq.gyro)[kept])
+    np.testing.assert_array_equal(np.asarray(marked.accel)[kept], np.asarray(seq.accel)[kept])
+    np.testing.assert_array_equal(np.asarray(marked.images), np.asarray(seq.images))
+    # Nothing flagged, nothing marked.
+    np.testing.assert_array_equal(
+        np.asarray(kitti.without_dropouts(seq, np.zeros(seq.num_frames, bool)).gyro), np.asarray(seq.gyro)
+    )
+    with pytest.raises(ValueError, match="a boolean per frame"):
+        kitti.without_dropouts(seq, flags[1:])
+    with pytest.raises(ValueError, match="a boolean per frame"):
+        kitti.without_dropouts(seq, flags.astype(int))

@@ -144,3 +144,11 @@ def test_the_published_imu_of_06_starts_with_a_dropout(reference_data):
     curvature = kitti.frame_curvature(six)
     assert curvature[flagged[1:-1]].max() < kitti.INTERPOLATION_TOLERANCE / 10
     assert min(curvature[~flagged[1:-1]].min(), kitti.frame_curvature(seven).min()) > 10 * kitti.INTERPOLATION_TOLERANCE
+
+
+def test_the_blocks_of_06s_dropout_are_marked_missing(reference_data):
+    # Flagged frames 1-11: the line runs from frame 0 to 12, so blocks 1-12 lie on it.
+    imu = reference_data / "kitti_odom" / "imu" / "06.mat"
+    raw = kitti.read_run(reference_data / "realdata" / "kitti_odometry_06_first51", imu=imu)
+    marked = kitti.without_dropouts(raw, kitti.interpolated_frames(kitti.read_kitti_imu(imu, np.asarray(raw.frame_times))))
+    np.testing.assert_array_equal(np.flatnonzero(np.isnan(np.asarray(marked.gyro)).all((1, 2))), np.r_[0, 1:13])

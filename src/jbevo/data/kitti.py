@@ -35,6 +35,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 import cv2
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -164,6 +165,24 @@ def interpolated_frames(stream: ImuStream, rows_per_frame: int = 10, tolerance: 
     curvature = frame_curvature(stream, rows_per_frame)
     frames = (len(stream.times) - 1) // rows_per_frame + 1
     return np.concatenate([[False], curvature < tolerance, [False]])[:frames]
+
+
+def without_dropouts(seq: Sequence, interpolated: np.ndarray) -> Sequence:
+    """``seq`` with the IMU blocks that lie on a dropout's straight line (:func:`interpolated_frames`)
+    marked missing (NaN), so that a filter treats them as unmeasured instead of as a measured
+    straight line (:attr:`jbevo.inertial.speed_aided.SpeedAidedAttitude.gap_rate_std`).
+
+    ``interpolated``: a boolean per frame of ``seq``. A gap flagged at frames ``a .. b`` is one line
+    from frame ``a - 1`` to ``b + 1``, so blocks ``a .. b + 1`` (block ``t`` runs from frame
+    ``t - 1`` to frame ``t``) lie on it; the recorded sample that opens block ``a`` goes with it."""
+    flags = np.asarray(interpolated)
+    if flags.dtype != bool or flags.shape != (seq.num_frames,):
+        raise ValueError(f"interpolated must be a boolean per frame, shape ({seq.num_frames},); got {flags.dtype} {flags.shape}")
+    blocks = flags | np.concatenate([[False], flags[:-1]])
+    mask = jnp.asarray(blocks)[:, None, None]
+    return check(
+        eqx.tree_at(lambda q: (q.gyro, q.accel), seq, (jnp.where(mask, jnp.nan, seq.gyro), jnp.where(mask, jnp.nan, seq.accel)))
+    )
 
 
 def _imu_file(imu: str | Path, sequence: str) -> Path:
@@ -455,6 +474,7 @@ __all__ = [
     "read_oxts",
     "read_raw",
     "read_run",
+    "without_dropouts",
     "write_odometry",
     "write_raw",
 ]

@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -142,6 +143,15 @@ class SpeedAidedAttitude(FilterNoise):
     """Learnable noise of the speed-aided pitch/roll filter: ``motion_noise`` per frame for
     (pitch, roll, 3 gyro biases, speed), ``measurement_noise`` for (lateral tilt, speed).
 
+    ``gap_rate_std`` (static, rad/s; 0: off): through a frame whose gyro block is missing
+    altogether (all rows NaN, e.g. an IMU dropout marked as such:
+    :func:`jbevo.data.kitti.without_dropouts`) the prediction holds the attitude, and the pitch
+    and roll variances grow by ``(S dt gap_rate_std)^2`` (``S`` samples of ``dt``): the rates the
+    gyro did not see are taken as unknown, about ``gap_rate_std`` in size, constant through a
+    frame and independent from frame to frame. Off, a missing stretch leaves the belief as
+    certain as a measured one, and the measurements after it barely move it. Blocks with some valid rows (padding) are
+    predicted as before. The smoother (:meth:`smooth`) does not add it.
+
     Example::
 
         >>> import jax.numpy as jnp
@@ -153,28 +163,42 @@ class SpeedAidedAttitude(FilterNoise):
         5.0
     """
 
+    gap_rate_std: float = eqx.field(static=True, default=0.0)
+
     @classmethod
     def create(
         cls,
         dt: float = 0.01,
         motion_std=(2e-4, 2e-4, 2e-5, 2e-5, 2e-5, 0.05),
         measurement_std=(0.02, 3.0),
+        gap_rate_std: float = 0.0,
     ) -> SpeedAidedAttitude:
         """Hand-set: ~0.01 deg of gyro error and 5 cm/s of accelerometer error per frame; ~1 deg
         of false lateral tilt. The odometry speed's 3 m/s is not its noise (a few cm per frame,
         ~0.5 m/s) but a slow coupling: a tighter value lets the speed jerk the pitch, and every
         pitch jump moves the BEV."""
+        if not gap_rate_std >= 0:
+            raise ValueError(f"gap_rate_std must be non-negative, got {gap_rate_std}")
         return cls(
             DiagonalCovariance.from_std(jnp.asarray(motion_std)),
             DiagonalCovariance.from_std(jnp.asarray(measurement_std)),
             dt,
+            float(gap_rate_std),
         )
 
     def predict(self, state: AttitudeState, gyro: Float[Array, "S 3"], accel: Float[Array, "S 3"]) -> AttitudeState:
-        """Propagate through a frame's IMU block (missing samples filled with the block's mean)."""
+        """Propagate through a frame's IMU block (missing samples filled with the block's mean;
+        with ``gap_rate_std``, the pitch and roll variances grow through a missing block)."""
         model = speed_aided_model(self.dt)
-        moved = ukf.predict(model, state.gaussian(), (fill_missing(gyro), fill_missing(accel)), self.motion_noise())
-        return AttitudeState(*moved)
+        moved = AttitudeState(
+            *ukf.predict(model, state.gaussian(), (fill_missing(gyro), fill_missing(accel)), self.motion_noise())
+        )
+        if self.gap_rate_std == 0:
+            return moved
+        _, _, count = valid_mean(gyro)
+        grow = jnp.where(count[0] == 0, (gyro.shape[-2] * self.dt * self.gap_rate_std) ** 2, 0.0).astype(moved.cov.dtype)
+        tilt = jnp.zeros(moved.mean.shape[-1], moved.cov.dtype).at[_PITCH].set(1.0).at[_ROLL].set(1.0)
+        return AttitudeState(moved.mean, moved.cov + jnp.diag(grow * tilt))
 
     def smooth(self, beliefs: AttitudeState, gyro: Float[Array, "T S 3"], accel: Float[Array, "T S 3"]) -> AttitudeState:
         """Offline: the unscented RTS smoother over this filter's per-frame ``beliefs`` (a stacked

@@ -41,6 +41,13 @@ STREET_GYRO_WINDOW = float(np.radians(0.5))
 STREET_BANDS_MIN_TRAVEL = 1.0
 
 
+#: The pitch and roll rate (rad/s) the real-street model's attitude filter assumes through a frame
+#: whose gyro block is missing (:attr:`jbevo.inertial.speed_aided.SpeedAidedAttitude.gap_rate_std`):
+#: 1.5 deg/s, the RMS of the roll and pitch rates of KITTI's training drives on record (00, 01,
+#: 02, 04, 05, 08; ``benchmarks/real_kitti.py`` writes it as ``training_tilt_rate_rms_deg_s``).
+STREET_GAP_RATE_STD = float(np.radians(1.5))
+
+
 #: The walk of the level road's tilt (radians per square-root metre: 0.2 deg over a kilometre),
 #: chosen on the street world's KITTI 00 and 08 (800 frames each, seed 100; no test drive) among
 #: 0.0025 (the grade's walk), 0.001, 0.0005, 0.00025, 0.0001 and 0.00005: the pooled t_err fell
@@ -60,7 +67,8 @@ def street_model(
     """The hand-set BEVO for real streets (KITTI-size frames with a calibrated IMU): the road view
     (:class:`jbevo.vision.road_view.RoadView`: camera against the road, road corridor), the gyro's
     turn fused with DPC's (:class:`jbevo.models.yaw_fusion.YawFusion`), DPC's rotation searched
-    within :data:`STREET_GYRO_WINDOW` of the gyro's, and with ``bands`` the robust band update,
+    within :data:`STREET_GYRO_WINDOW` of the gyro's, the attitude uncertain by
+    :data:`STREET_GAP_RATE_STD` through missing gyro blocks, and with ``bands`` the robust band update,
     engaged from ``bands_min_travel`` metres per frame, measuring the road's tilt
     (:class:`jbevo.models.road_tilt.RoadTilt`) rather than the pitch against gravity; with
     ``bands_keyframes`` the bands hold keyframes below that travel
@@ -75,6 +83,7 @@ def street_model(
     model = Bevo.create(
         grid, imu_dt, gyro_window=STREET_GYRO_WINDOW, road=True, yaw_fusion=True, road_tilt=bands, forward_fusion=forward_fusion
     )
+    model = dataclasses.replace(model, attitude=dataclasses.replace(model.attitude, gap_rate_std=STREET_GAP_RATE_STD))
     geometry = BandGeometry.create(robust=True, min_travel=bands_min_travel, keyframes=bands_keyframes) if bands else None
     if level_road:
         if not bands:
@@ -87,6 +96,7 @@ __all__ = [
     "GYRO_WINDOW",
     "LEVEL_ROAD_WALK",
     "STREET_BANDS_MIN_TRAVEL",
+    "STREET_GAP_RATE_STD",
     "STREET_GRID",
     "STREET_GYRO_WINDOW",
     "localization_model",
