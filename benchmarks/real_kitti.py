@@ -17,9 +17,12 @@ the gyro's turn fused with DPC's; where named, robust bands engaged from 1 m per
 measure the road's tilt) with the filter's, the true (levelled) or a zero attitude; the band
 rows also without the road tilt (the slope then corrects the pitch against gravity), engaged
 from 0.5 m per frame or at any speed, and with keyframes (the band pair is the current BEV and
-the last one at which the bands engaged; they engage once the travel since reaches 1 m), and
+the last one at which the bands engaged; they engage once the travel since reaches 1 m),
 projected on a level road (``level road``: the BEV's pitch the bands' tilt alone, its roll zero;
-:attr:`jbevo.models.road_tilt.RoadTilt.level`). Learned rows fit on one half of a run and are scored on the other
+:attr:`jbevo.models.road_tilt.RoadTilt.level`), and on the run with the IMU blocks that lie on
+the published file's dropout lines marked missing (``IMU dropouts missing``:
+:func:`jbevo.data.kitti.without_dropouts`; the preset's attitude then widens through them by
+:data:`jbevo.models.presets.STREET_GAP_RATE_STD`, or, ``attitude not widened``, only holds). Learned rows fit on one half of a run and are scored on the other
 (both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
 ``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
 ``street, learned`` the whole road view, the yaw fusion and DPC's parameters (11),
@@ -43,6 +46,8 @@ the distance travelled), ``pitch_roll_max_deg``, ``pitch_roll_worst_frame`` (the
 ``pitch_roll_rmse_deg`` (the attitude the BEVs were projected with against the levelled truth).
 ``imu_interpolated_frames[<run>]``: the run's frames whose published IMU sample is a straight line
 over an OXTS dropout (:func:`jbevo.data.kitti.interpolated_frames`);
+``training_tilt_rate_rms_deg_s``: the RMS of the published roll and pitch rates over the KITTI
+training drives that no run here comes from (the rate ``STREET_GAP_RATE_STD`` assumes);
 ``gyro_alone_drift_deg[<run>]["from_frame"][k]``: the largest pitch/roll error over the next
 ``frames`` frames of the calibrated gyro integrated alone from the truth at frame ``k``. Keys: ``runs[<run>][<variant>][<metric>]``
 with ``<run>`` one of ``06``, ``06 first half``, ``06 second half`` and likewise for 07.
@@ -69,6 +74,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from scipy.io import loadmat
 
 from jbevo.data import kitti
 from jbevo.data import sequence as sq
@@ -192,31 +198,60 @@ def segments(increments, pitch_roll, seq: sq.Sequence) -> dict[str, dict]:
 # ------------------------------------------------------------------ models
 
 
-def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, bool]]:
-    """The hand-set rows: label -> (model, on the calibrated IMU and levelled truth)."""
+#: The data a hand-set row runs on: the run as shipped, with the calibrated IMU and levelled truth,
+#: and the latter with the IMU blocks on a dropout's straight line marked missing
+#: (:func:`jbevo.data.kitti.without_dropouts`).
+SHIPPED, CALIBRATED, DROPOUTS_MISSING = "as shipped", "calibrated", "calibrated, dropouts missing"
+
+
+def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, str]]:
+    """The hand-set rows: label -> (model, the data it runs on: ``SHIPPED``, ``CALIBRATED`` or
+    ``DROPOUTS_MISSING``)."""
     plain = Bevo.create(STREET_GRID, imu_dt)
     banded = Bevo.create(STREET_GRID, imu_dt, bands=True)
     street = street_model(imu_dt, bands=False)
+    preset = street_model(imu_dt, bands=True)
     return {
-        "BEVO, uncalibrated IMU": (plain, False),
-        "BEVO + bands, uncalibrated IMU": (banded, False),
-        "BEVO": (plain, True),
-        "BEVO + bands": (banded, True),
-        "BEVO, true attitude": (dataclasses.replace(plain, attitude_source="truth"), True),
-        "street": (street, True),
-        "street + robust bands": (street_model(imu_dt, bands=True), True),
-        "street + robust bands, level road": (street_model(imu_dt, bands=True, level_road=True), True),
-        "street + robust bands, no road tilt": (dataclasses.replace(street_model(imu_dt, bands=True), road_tilt=None), True),
-        "street + robust bands, from 0.5 m per frame": (street_model(imu_dt, bands=True, bands_min_travel=0.5), True),
-        "street + robust bands, keyframes": (street_model(imu_dt, bands=True, bands_keyframes=True), True),
-        "street + robust bands, at any speed": (street_model(imu_dt, bands=True, bands_min_travel=0.0), True),
+        "BEVO, uncalibrated IMU": (plain, SHIPPED),
+        "BEVO + bands, uncalibrated IMU": (banded, SHIPPED),
+        "BEVO": (plain, CALIBRATED),
+        "BEVO + bands": (banded, CALIBRATED),
+        "BEVO, true attitude": (dataclasses.replace(plain, attitude_source="truth"), CALIBRATED),
+        "street": (street, CALIBRATED),
+        "street + robust bands": (preset, CALIBRATED),
+        "street + robust bands, IMU dropouts missing": (preset, DROPOUTS_MISSING),
+        "street + robust bands, IMU dropouts missing, attitude not widened": (
+            dataclasses.replace(preset, attitude=dataclasses.replace(preset.attitude, gap_rate_std=0.0)),
+            DROPOUTS_MISSING,
+        ),
+        "street + robust bands, level road": (street_model(imu_dt, bands=True, level_road=True), CALIBRATED),
+        "street + robust bands, no road tilt": (dataclasses.replace(preset, road_tilt=None), CALIBRATED),
+        "street + robust bands, from 0.5 m per frame": (street_model(imu_dt, bands=True, bands_min_travel=0.5), CALIBRATED),
+        "street + robust bands, keyframes": (street_model(imu_dt, bands=True, bands_keyframes=True), CALIBRATED),
+        "street + robust bands, at any speed": (street_model(imu_dt, bands=True, bands_min_travel=0.0), CALIBRATED),
         "street + robust bands, at any speed, no road tilt": (
             dataclasses.replace(street_model(imu_dt, bands=True, bands_min_travel=0.0), road_tilt=None),
-            True,
+            CALIBRATED,
         ),
-        "street, true attitude": (dataclasses.replace(street, attitude_source="truth"), True),
-        "street, zero attitude (no IMU)": (dataclasses.replace(street, attitude_source="zero"), True),
+        "street, true attitude": (dataclasses.replace(street, attitude_source="truth"), CALIBRATED),
+        "street, zero attitude (no IMU)": (dataclasses.replace(street, attitude_source="zero"), CALIBRATED),
     }
+
+
+def training_tilt_rate_rms(imu: Path) -> float:
+    """The RMS (deg/s) of the roll and pitch rates (the published gyro's x and y) over the KITTI
+    training drives with an IMU file that no real run here comes from: the rate
+    :data:`jbevo.models.presets.STREET_GAP_RATE_STD` assumes through a missing gyro block."""
+    squares, count = 0.0, 0
+    for name in KITTI_TRAIN:
+        path = imu / f"{name}.mat"
+        if name in RUNS or not path.is_file():
+            continue
+        frames = (len(loadmat(path)["imu_data_interp"]) - 1) // kitti_imu.SAMPLES_PER_FRAME + 1
+        stream = kitti.read_kitti_imu(path, np.arange(frames) * kitti_imu.FRAME_STEP_S)
+        rates = np.degrees(np.asarray(stream.gyro, float)[:, :2])
+        squares, count = squares + float(np.sum(rates**2)), count + rates.size
+    return float(np.sqrt(squares / count))
 
 
 #: Learned rows: label -> (whether the street model has its bands, which of its leaves learn).
@@ -429,10 +464,11 @@ def main() -> None:
     runs = load_runs(Path(root))
     imu = Path(root) / "kitti_odom" / "imu"
     # The frames whose published IMU is a straight line over an OXTS dropout (frames the OXTS unit did not record).
-    dropouts = {
-        name: np.flatnonzero(kitti.interpolated_frames(kitti.read_kitti_imu(imu / f"{name}.mat", np.asarray(seq.frame_times))))
+    interpolated = {
+        name: kitti.interpolated_frames(kitti.read_kitti_imu(imu / f"{name}.mat", np.asarray(seq.frame_times)))
         for name, (_, seq) in runs.items()
     }
+    dropouts = {name: np.flatnonzero(flags) for name, flags in interpolated.items()}
     table: dict[str, dict] = {}
     learned_params: dict[str, dict] = {}
     selection: dict[str, dict] = {}
@@ -447,8 +483,9 @@ def main() -> None:
         print(f"run {name}: {seq.num_frames} frames", flush=True)
         trajectories = {}
         street_out = None
-        for label, (model, calibrated) in hand_set(seq.imu_dt).items():
-            data = seq if calibrated else raw
+        data_for = {SHIPPED: raw, CALIBRATED: seq, DROPOUTS_MISSING: kitti.without_dropouts(seq, interpolated[name])}
+        for label, (model, data_key) in hand_set(seq.imu_dt).items():
+            data = data_for[data_key]
             out = run_bevo(model, data, warm_start=True)
             put(name, label, segments(out.increments, out.pitch_roll, seq))
             if label == "street":
@@ -517,6 +554,7 @@ def main() -> None:
             },
             "runs": table,
             "imu_interpolated_frames": {name: frames.tolist() for name, frames in dropouts.items()},
+            "training_tilt_rate_rms_deg_s": training_tilt_rate_rms(imu),
             "gyro_alone_drift_deg": {
                 name: {"frames": GYRO_WINDOW, "from_frame": gyro_alone_drift(seq)} for name, (_, seq) in runs.items()
             },
