@@ -95,9 +95,11 @@ def test_frames_interpolated_over_a_dropout_are_found():
     rows[a : b + 1] = rows[a] + np.linspace(0.0, 1.0, b - a + 1)[:, None] * (rows[b] - rows[a])
     stream = ImuStream(np.arange(len(rows)) * 0.01, rows[:, 3:], rows[:, :3])
     np.testing.assert_array_equal(np.flatnonzero(kitti.interpolated_frames(stream, per)), np.arange(9, 14))
+    np.testing.assert_allclose(kitti.dropout_spans(stream, per), [[a * 0.01, b * 0.01]])
     # Without the dropout, the samples' own noise keeps every frame off the line.
     noisy = rows + rng.normal(0.0, 0.03, rows.shape)
     assert not kitti.interpolated_frames(ImuStream(stream.times, noisy[:, 3:], noisy[:, :3]), per).any()
+    assert kitti.dropout_spans(ImuStream(stream.times, noisy[:, 3:], noisy[:, :3]), per).shape == (0, 2)
     # One or two frames have no interior frame to test.
     for frames in (1, 2):
         short = ImuStream(*(field[: per * (frames - 1) + 1] for field in stream))
@@ -108,22 +110,24 @@ def test_frames_interpolated_over_a_dropout_are_found():
         kitti.interpolated_frames(stream, 0)
 
 
-def test_blocks_on_a_dropout_line_are_marked_missing(seq):
-    # Frames 3-5 flagged: the line runs from frame 2 to frame 6, so blocks 3-6 lie on it.
-    flags = np.zeros(seq.num_frames, bool)
-    flags[3:6] = True
-    marked = kitti.without_dropouts(seq, flags)
-    missing = np.isnan(np.asarray(marked.gyro)).all((1, 2)) & np.isnan(np.asarray(marked.accel)).all((1, 2))
-    np.testing.assert_array_equal(np.flatnonzero(missing), [3, 4, 5, 6])
-    kept = ~missing
-    np.testing.assert_array_equal(np.asarray(marked.gyro)[kept], np.asarray(seq.gyro)[kept])
-    np.testing.assert_array_equal(np.asarray(marked.accel)[kept], np.asarray(seq.accel)[kept])
-    np.testing.assert_array_equal(np.asarray(marked.images), np.asarray(seq.images))
-    # Nothing flagged, nothing marked.
-    np.testing.assert_array_equal(
-        np.asarray(kitti.without_dropouts(seq, np.zeros(seq.num_frames, bool)).gyro), np.asarray(seq.gyro)
-    )
-    with pytest.raises(ValueError, match="a boolean per frame"):
-        kitti.without_dropouts(seq, flags[1:])
-    with pytest.raises(ValueError, match="a boolean per frame"):
-        kitti.without_dropouts(seq, flags.astype(int))
+def test_rows_on_a_dropout_line_are_marked_missing(seq):
+    # A line from frame 2 to frame 6: the rows strictly between go, the knots' stay.
+    frame_t, times = np.asarray(seq.frame_times, float), np.asarray(seq.imu_times, float)
+    span = np.array([[frame_t[2], frame_t[6]]])
+    for offset in (0.0, 0.05):
+        marked = kitti.without_dropouts(seq, span, time_offset_s=offset)
+        gyro, accel = np.asarray(marked.gyro), np.asarray(marked.accel)
+        expected = (times - offset > frame_t[2]) & (times - offset < frame_t[6])
+        assert expected.sum() > 30
+        np.testing.assert_array_equal(np.isnan(gyro).any(-1), expected)
+        np.testing.assert_array_equal(np.isnan(accel).any(-1), expected)
+        np.testing.assert_array_equal(gyro[~expected], np.asarray(seq.gyro)[~expected])
+        np.testing.assert_array_equal(np.asarray(marked.images), np.asarray(seq.images))
+    # Read as published (no offset), the blocks wholly on the line are those after the first knot's.
+    wholly = np.isnan(np.asarray(kitti.without_dropouts(seq, span).gyro)).all((1, 2))
+    np.testing.assert_array_equal(np.flatnonzero(wholly), [4, 5, 6])
+    # No span, nothing marked.
+    np.testing.assert_array_equal(np.asarray(kitti.without_dropouts(seq, np.zeros((0, 2))).gyro), np.asarray(seq.gyro))
+    for bad in (span[0], span[:, ::-1]):
+        with pytest.raises(ValueError, match="spans must be"):
+            kitti.without_dropouts(seq, bad)

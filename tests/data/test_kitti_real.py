@@ -146,9 +146,13 @@ def test_the_published_imu_of_06_starts_with_a_dropout(reference_data):
     assert min(curvature[~flagged[1:-1]].min(), kitti.frame_curvature(seven).min()) > 10 * kitti.INTERPOLATION_TOLERANCE
 
 
-def test_the_blocks_of_06s_dropout_are_marked_missing(reference_data):
-    # Flagged frames 1-11: the line runs from frame 0 to 12, so blocks 1-12 lie on it.
+def test_the_rows_of_06s_dropout_are_marked_missing(reference_data):
+    # Flagged frames 1-11: the line runs from frame 0's sample to frame 12's. Read as published,
+    # block 1 keeps frame 0's sample and blocks 2-12 go whole (block 0 is NaN in the layout).
     imu = reference_data / "kitti_odom" / "imu" / "06.mat"
     raw = kitti.read_run(reference_data / "realdata" / "kitti_odometry_06_first51", imu=imu)
-    marked = kitti.without_dropouts(raw, kitti.interpolated_frames(kitti.read_kitti_imu(imu, np.asarray(raw.frame_times))))
-    np.testing.assert_array_equal(np.flatnonzero(np.isnan(np.asarray(marked.gyro)).all((1, 2))), np.r_[0, 1:13])
+    spans = kitti.dropout_spans(kitti.read_kitti_imu(imu, np.asarray(raw.frame_times)))
+    np.testing.assert_allclose(spans, [[raw.frame_times[0], raw.frame_times[12]]])
+    marked = np.isnan(np.asarray(kitti.without_dropouts(raw, spans).gyro))
+    np.testing.assert_array_equal(np.flatnonzero(marked.all((1, 2))), np.r_[0, 2:13])
+    assert marked[1].any(-1).sum() == 9

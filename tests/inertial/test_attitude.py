@@ -192,7 +192,9 @@ def test_a_missing_gyro_block_widens_the_attitude_by_the_assumed_rate():
     np.testing.assert_allclose(np.diag(grow)[:2], (10 * 0.01 * rate) ** 2, rtol=1e-3)
     grow[0, 0] = grow[1, 1] = 0.0
     np.testing.assert_allclose(grow, 0.0, atol=1e-12)
-    # Measured blocks, whole or padded with missing rows, are predicted as without it.
+    # Not widened when told not to (BEVO's frame 0), and measured blocks, whole or padded with
+    # missing rows, are predicted as without it.
+    np.testing.assert_array_equal(np.asarray(widening.predict(state, missing, missing, widen=False).cov), np.asarray(a.cov))
     padded = gyro.at[5:].set(jnp.nan)
     for g in (gyro, padded):
         a, b = plain.predict(state, g, level), widening.predict(state, g, level)

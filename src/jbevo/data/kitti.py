@@ -167,22 +167,38 @@ def interpolated_frames(stream: ImuStream, rows_per_frame: int = 10, tolerance: 
     return np.concatenate([[False], curvature < tolerance, [False]])[:frames]
 
 
-def without_dropouts(seq: Sequence, interpolated: np.ndarray) -> Sequence:
-    """``seq`` with the IMU blocks that lie on a dropout's straight line (:func:`interpolated_frames`)
+def dropout_spans(stream: ImuStream, rows_per_frame: int = 10, tolerance: float = INTERPOLATION_TOLERANCE) -> np.ndarray:
+    """The time spans ``(start, end)`` (the stream's clock, shape ``(G, 2)``) of the straight lines
+    over which a KITTI odometry IMU stream's dropouts were filled: a gap flagged at frames
+    ``a .. b`` (:func:`interpolated_frames`) runs from frame ``a - 1``'s recorded sample to frame
+    ``b + 1``'s; every row strictly inside is on the line."""
+    flags = interpolated_frames(stream, rows_per_frame, tolerance)
+    knots = np.asarray(stream.times, float)[::rows_per_frame]
+    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # gap frames [start, end)
+    return np.stack([knots[starts - 1], knots[ends]], -1) if len(starts) else np.zeros((0, 2))
+
+
+def without_dropouts(seq: Sequence, spans: np.ndarray, time_offset_s: float = 0.0) -> Sequence:
+    """``seq`` with the IMU rows that lie on a dropout's straight line (:func:`dropout_spans`)
     marked missing (NaN), so that a filter treats them as unmeasured instead of as a measured
     straight line (:attr:`jbevo.inertial.speed_aided.SpeedAidedAttitude.gap_rate_std`).
 
-    ``interpolated``: a boolean per frame of ``seq``. A gap flagged at frames ``a .. b`` is one line
-    from frame ``a - 1`` to ``b + 1``, so blocks ``a .. b + 1`` (block ``t`` runs from frame
-    ``t - 1`` to frame ``t``) lie on it; the recorded sample that opens block ``a`` goes with it."""
-    flags = np.asarray(interpolated)
-    if flags.dtype != bool or flags.shape != (seq.num_frames,):
-        raise ValueError(f"interpolated must be a boolean per frame, shape ({seq.num_frames},); got {flags.dtype} {flags.shape}")
-    blocks = flags | np.concatenate([[False], flags[:-1]])
-    mask = jnp.asarray(blocks)[:, None, None]
-    return check(
-        eqx.tree_at(lambda q: (q.gyro, q.accel), seq, (jnp.where(mask, jnp.nan, seq.gyro), jnp.where(mask, jnp.nan, seq.accel)))
-    )
+    A row stamped ``t`` in ``seq.imu_times`` is on a line if ``t - time_offset_s`` lies strictly
+    inside one of ``spans``: ``time_offset_s`` is what a calibration added to the stream's stamps
+    (:attr:`jbevo.inertial.calibration.ImuCalibration.time_offset_s`; zero for a sequence read as
+    published), so that the rows of a calibrated, resampled sequence are marked where they took
+    their values from the line."""
+    spans = np.asarray(spans, float)
+    if spans.ndim != 2 or spans.shape[1] != 2 or not np.all(spans[:, 1] > spans[:, 0]):
+        raise ValueError(f"spans must be (start, end) pairs with end > start, shape (G, 2); got {spans.tolist()}")
+    t = np.asarray(seq.imu_times, float) - time_offset_s
+    on_line = np.zeros(t.shape, bool)
+    for start, end in spans:
+        on_line |= (t > start) & (t < end)
+    mask = jnp.asarray(on_line)[..., None]
+    marked = (jnp.where(mask, jnp.nan, seq.gyro), jnp.where(mask, jnp.nan, seq.accel))
+    return check(eqx.tree_at(lambda q: (q.gyro, q.accel), seq, marked))
 
 
 def _imu_file(imu: str | Path, sequence: str) -> Path:
@@ -464,6 +480,7 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
 __all__ = [
     "EARTH_RADIUS",
     "INTERPOLATION_TOLERANCE",
+    "dropout_spans",
     "frame_curvature",
     "has_imu",
     "imu_to_rectified_camera",

@@ -186,9 +186,12 @@ class SpeedAidedAttitude(FilterNoise):
             float(gap_rate_std),
         )
 
-    def predict(self, state: AttitudeState, gyro: Float[Array, "S 3"], accel: Float[Array, "S 3"]) -> AttitudeState:
+    def predict(
+        self, state: AttitudeState, gyro: Float[Array, "S 3"], accel: Float[Array, "S 3"], widen: Bool[Array, ""] | bool = True
+    ) -> AttitudeState:
         """Propagate through a frame's IMU block (missing samples filled with the block's mean;
-        with ``gap_rate_std``, the pitch and roll variances grow through a missing block)."""
+        with ``gap_rate_std`` and ``widen``, the pitch and roll variances grow through a missing
+        block)."""
         model = speed_aided_model(self.dt)
         moved = AttitudeState(
             *ukf.predict(model, state.gaussian(), (fill_missing(gyro), fill_missing(accel)), self.motion_noise())
@@ -196,7 +199,8 @@ class SpeedAidedAttitude(FilterNoise):
         if self.gap_rate_std == 0:
             return moved
         _, _, count = valid_mean(gyro)
-        grow = jnp.where(count[0] == 0, (gyro.shape[-2] * self.dt * self.gap_rate_std) ** 2, 0.0).astype(moved.cov.dtype)
+        grow = jnp.where((count[0] == 0) & widen, (gyro.shape[-2] * self.dt * self.gap_rate_std) ** 2, 0.0)
+        grow = grow.astype(moved.cov.dtype)
         tilt = jnp.zeros(moved.mean.shape[-1], moved.cov.dtype).at[_PITCH].set(1.0).at[_ROLL].set(1.0)
         return AttitudeState(moved.mean, moved.cov + jnp.diag(grow * tilt))
 

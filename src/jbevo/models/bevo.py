@@ -347,7 +347,11 @@ class Bevo(eqx.Module):
         then the measurement updates (the bands' pitch and pitch-rate bias, or the road's tilt,
         from the bands engaged at this frame's travel, or with keyframes at the travel since the
         keyframe; the odometry's speed; the lateral tilt)."""
-        belief = self.attitude.predict(carry.attitude, frame.gyro, frame.accel)
+        # A missing gyro block widens the attitude from frame 1 on (frame 0's block precedes the
+        # first image; the initial belief states its uncertainty) and only where the filter sets
+        # the attitude (the other sources also run on sequences without any IMU).
+        widen = (frame.number > 0) if self.attitude_source == "filter" else False
+        belief = self.attitude.predict(carry.attitude, frame.gyro, frame.accel, widen)
         pitch_roll = self.projection_attitude(belief, frame)
         tilt = carry.road_tilt
         if self.road_tilt is not None:
