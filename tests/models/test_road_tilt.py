@@ -2,9 +2,9 @@
 on a drive whose camera looks at the road 0.4 deg further down than the IMU's level says (a
 grade the IMU cannot see), BEVO with bands finds the tilt while its pitch against gravity stays
 true; the plain band update instead pulls the gravity pitch off. Below the bands' travel gate,
-the odometry's speed moves it toward the truth, and keyframes let the bands find it too. The joint
-update of the tilt and the attitude filter by the speed against an independent Kalman update of
-the stacked state, and its gradient."""
+the odometry's speed moves it toward the truth (nothing does without it), and keyframes let the
+bands find it too. The joint update of the tilt and the attitude filter by the speed against an
+independent Kalman update of the stacked state, and its gradient."""
 
 import dataclasses
 
@@ -254,14 +254,19 @@ def test_a_level_road_projects_on_the_road_whatever_the_grade(world):
 def test_keyframes_find_the_road_tilt_below_the_travel_gate(world):
     """At 0.4 m per frame the bands engaged from 1 m per frame never see the tilted road: only the
     odometry's speed, 14 % too fast, measures it, and moves it steadily toward the truth (past
-    0.15 deg of the 0.4 in 25 frames; the rest, for now, in the gravity pitch, 0.01-0.03 deg off);
-    with keyframes the bands measure it over every third frame (1.2 m) and find it within 0.1 deg
+    0.15 deg of the 0.4 in 25 frames; the rest, for now, in the gravity pitch, 0.01-0.03 deg off;
+    without the speed's share the tilt stays level); with keyframes the bands measure it over every third frame (1.2 m) and find it within 0.1 deg
     (the mean of the last nine frames), the gravity pitch true to 0.01 deg."""
     slow = _tilted_drive(world, 0.4, 25)
     truth = np.asarray(slow.pitch_roll[:, 0])
-    tilt, pitch = _tilt_and_pitch(_street_bands(slow, keyframes=False), slow)
+    gated = _street_bands(slow, keyframes=False)
+    tilt, pitch = _tilt_and_pitch(gated, slow)
     assert np.all(np.diff(tilt) > 0) and np.radians(0.15) < tilt[-1] < TILT
     assert np.radians(0.01) < np.abs(pitch - truth).max() < np.radians(0.03)
+    # Without the speed's share (speed_coupling off) nothing measures it: the tilt stays level.
+    assert gated.road_tilt is not None
+    uncoupled = dataclasses.replace(gated, road_tilt=dataclasses.replace(gated.road_tilt, speed_coupling=False))
+    np.testing.assert_array_equal(_tilt_and_pitch(uncoupled, slow)[0], 0.0)
     tilt, pitch = _tilt_and_pitch(_street_bands(slow, keyframes=True), slow)
     # Before the first keyframe pair (1.2 m, at frame 3) only the speed moves the tilt, slowly.
     assert tilt[2] < np.radians(0.05) and tilt[3] - tilt[2] > 5 * (tilt[2] - tilt[1])

@@ -114,3 +114,36 @@ def test_only_jbevo_classes_are_rebuilt(tmp_path):
         np.savez(f, **arrays)
     with pytest.raises(ValueError, match="only hold jbevo's classes"):
         checkpoint.load(tmp_path / "foreign.ckpt")
+
+
+def test_a_checkpoint_without_a_field_added_since_takes_its_default(tmp_path):
+    from jbevo.models.presets import street_model
+
+    model = street_model(0.01)
+    assert model.attitude.gap_rate_std > 0 and model.road_tilt is not None
+    good = tmp_path / "street.ckpt"
+    checkpoint.save(good, model)
+    with np.load(good) as data:
+        arrays = dict(data)
+
+    def written(config, name):
+        with open(tmp_path / name, "wb") as f:
+            np.savez(f, **(arrays | {"config": np.array(__import__("json").dumps(config))}))
+        return tmp_path / name
+
+    # As written before the filter and the road tilt had these static fields: their defaults.
+    config = checkpoint.model_config(model)
+    fields = config["model"]["fields"]
+    del fields["attitude"]["fields"]["gap_rate_std"], fields["road_tilt"]["fields"]["speed_coupling"]
+    back, _, _ = checkpoint.load(written(config, "older.ckpt"))
+    assert back.attitude.gap_rate_std == 0.0 and back.road_tilt.speed_coupling is True
+    np.testing.assert_array_equal(back.attitude.motion_noise.log_std, model.attitude.motion_noise.log_std)
+    # A field without a default, or one the class does not have, is still an error.
+    config = checkpoint.model_config(model)
+    del config["model"]["fields"]["attitude"]["fields"]["dt"]
+    with pytest.raises(ValueError, match="SpeedAidedAttitude has the fields"):
+        checkpoint.load(written(config, "no_dt.ckpt"))
+    config = checkpoint.model_config(model)
+    config["model"]["fields"]["attitude"]["fields"]["unknown"] = 1.0
+    with pytest.raises(ValueError, match="SpeedAidedAttitude has the fields"):
+        checkpoint.load(written(config, "unknown.ckpt"))

@@ -413,6 +413,7 @@ class Bevo(eqx.Module):
             belief = self.attitude.update_speed(belief, speed)
         else:
             sensitivity = 2.0 * self.grid.centre_distance / self.camera_height(camera, bev.dtype)
+            sensitivity = sensitivity if self.road_tilt.speed_coupling else jnp.zeros_like(sensitivity)
             belief, tilt = self.road_tilt.update_with_speed(self.attitude, belief, tilt, speed, sensitivity)
         belief = self.attitude.update_lateral_tilt(belief, frame.gyro, frame.accel)
         confidence = jnp.where(moving, reg.confidence, 0.0)

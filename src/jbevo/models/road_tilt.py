@@ -63,17 +63,22 @@ class RoadTilt(eqx.Module):
         log_walk_std: log of ``q``, radians per square-root metre travelled.
         initial_std: the prior's standard deviation (radians; static, hand-set 0.5 deg).
         level: static; the BEV's pitch is the tilt alone and its roll zero (module docstring).
+        speed_coupling: static; the odometry's speed measures the tilt too
+            (:meth:`update_with_speed`). Off (an ablation), only the bands' slope does.
     """
 
     log_walk_std: Float[Array, ""]
     initial_std: float = eqx.field(static=True, default=0.0087)
     level: bool = eqx.field(static=True, default=False)
+    speed_coupling: bool = eqx.field(static=True, default=True)
 
     @classmethod
-    def create(cls, walk_std: float = 0.0025, initial_std: float = 0.0087, level: bool = False) -> RoadTilt:
+    def create(
+        cls, walk_std: float = 0.0025, initial_std: float = 0.0087, level: bool = False, speed_coupling: bool = True
+    ) -> RoadTilt:
         if not (walk_std > 0 and initial_std > 0):
             raise ValueError(f"walk_std and initial_std must be positive, got {walk_std}, {initial_std}")
-        return cls(jnp.log(jnp.float32(walk_std)), float(initial_std), bool(level))
+        return cls(jnp.log(jnp.float32(walk_std)), float(initial_std), bool(level), bool(speed_coupling))
 
     def initial(self, dtype) -> ukf.GaussianState:
         """A level road, ``initial_std`` uncertain."""

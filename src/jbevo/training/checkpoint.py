@@ -51,13 +51,17 @@ def rebuild(description: Any) -> Any:
     if isinstance(description, dict):
         if "module" in description:
             cls = _module_class(description["module"])
-            expected = {f.name for f in dataclasses.fields(cls)}
+            fields = {f.name: f for f in dataclasses.fields(cls)}
             got = set(description["fields"])
-            if got != expected:
-                raise ValueError(f"{cls.__qualname__} has the fields {sorted(expected)}, the checkpoint {sorted(got)}")
+            # A field the class gained after the checkpoint was written takes its default.
+            defaulted = {n for n, f in fields.items() if n not in got and f.default is not dataclasses.MISSING}
+            if got | defaulted != set(fields):
+                raise ValueError(f"{cls.__qualname__} has the fields {sorted(fields)}, the checkpoint {sorted(got)}")
             obj = object.__new__(cls)
             for name, value in description["fields"].items():
                 object.__setattr__(obj, name, rebuild(value))
+            for name in defaulted:
+                object.__setattr__(obj, name, fields[name].default)
             return obj
         if "array" in description:
             return jnp.zeros(tuple(description["array"]), np.dtype(description["dtype"]))
