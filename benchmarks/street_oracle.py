@@ -12,6 +12,9 @@ the street world and the flat world, hand-set, warm start, on the KITTI-style gr
 * ``street + robust bands, level road``: the preset with its BEV projected on the road's plane,
   the bands' tilt its only pitch (``street_model(..., level_road=True)``,
   :attr:`jbevo.models.road_tilt.RoadTilt.level`), hand-set, its mounting unknown;
+* ``street + robust bands, tilt not measured by the speed``: the preset with the road tilt
+  updated by the bands' slope alone (:attr:`jbevo.models.road_tilt.RoadTilt.speed_coupling`
+  off), an ablation: below the bands' travel gate the tilt then only walks;
 * ``odometry at the preset's attitude``: the preset's odometry without bands (road view, yaw
   fusion, DPC) projected at the attitude the preset projected each frame's BEV with (its filter's
   pitch plus its road tilt, and its roll): the control for the next row, which differs from it in
@@ -73,6 +76,7 @@ WORLDS: dict[str, Street | None] = {"street world": STREET, "flat world": None}
 PRESET = "street + robust bands"
 KNOWN = "street + robust bands, mounting known"
 LEVEL = "street + robust bands, level road"
+UNCOUPLED = "street + robust bands, tilt not measured by the speed"
 REPLAY = "odometry at the preset's attitude"
 ORACLE = "odometry at the true attitude against the road"
 TRUE_PITCH = "odometry at the true pitch against the road, the preset's roll"
@@ -153,6 +157,8 @@ def models(imu_dt: float, street: Street | None) -> dict[str, Bevo]:
     if street is not None:  # the preset's road view is the flat world's nominal camera already
         out[KNOWN] = dataclasses.replace(preset, road=mounting(street))
     out[LEVEL] = street_model(imu_dt, KITTI_GRID, bands=True, level_road=True)
+    assert preset.road_tilt is not None
+    out[UNCOUPLED] = dataclasses.replace(preset, road_tilt=dataclasses.replace(preset.road_tilt, speed_coupling=False))
     oracle = dataclasses.replace(odometry, road=mounting(street))
     return out | {REPLAY: odometry, ORACLE: oracle, TRUE_PITCH: oracle, TRUE_ROLL: oracle}
 

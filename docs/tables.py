@@ -1127,8 +1127,8 @@ def street_oracle_rows(drives: dict) -> list[tuple[str, str]]:
 
 
 def street_oracle() -> str:
-    """The street preset, the preset with the camera's mounting known and on a level road, and its
-    odometry without bands at the preset's attitude, at the true attitude against the road and at
+    """The street preset, the preset with the camera's mounting known, on a level road and with
+    its road tilt not measured by the speed, and its odometry without bands at the preset's attitude, at the true attitude against the road and at
     the true attitude on one axis at a time, on KITTI 09 and 10 in the street and the flat world."""
     rec = record(STREET_ORACLE)
     d, piece = rec["drives"], f"{rec['settings']['piece_m']:.0f} m"
@@ -1163,6 +1163,21 @@ def street_oracle_projection() -> str:
     ]
     header = ["world: model"] + [f"{name}: pitch mean / pitch RMS / roll RMS / filter's pitch RMS (deg)" for name in drives]
     return table(header, rows)
+
+
+def street_oracle_uncoupled() -> str:
+    """The street preset's pooled t_err against its road tilt's without the speed's share, per
+    world, and the worst drive's of the latter."""
+    d = record(STREET_ORACLE)["drives"]
+    preset, ablation = "street + robust bands", "street + robust bands, tilt not measured by the speed"
+    parts = []
+    for world in ("street world", "flat world"):
+        worst = max((name for name in d if name != "pooled"), key=lambda name: d[name][world][ablation]["t_err_pct"])
+        parts.append(
+            f"{world} {d['pooled'][world][preset]['t_err_pct']:.2f} % against {d['pooled'][world][ablation]['t_err_pct']:.2f} %"
+            f" ({worst} alone: {d[worst][world][ablation]['t_err_pct']:.2f} %)"
+        )
+    return "; ".join(parts)
 
 
 def kitti_street_scale() -> str:
@@ -1414,5 +1429,6 @@ VALUES: dict[str, Callable[[], str]] = {
     "street_world_zero_shot_steps": street_world_zero_shot_steps,
     "real_kitti_keyframes_speed": real_kitti_keyframes_speed,
     "kitti_street_scale": kitti_street_scale,
+    "street_oracle_uncoupled": street_oracle_uncoupled,
     "street_world_minutes": street_world_minutes,
 }
