@@ -21,7 +21,8 @@ the last one at which the bands engaged; they engage once the travel since reach
 projected on a level road (``level road``: the BEV's pitch the bands' tilt alone, its roll zero;
 :attr:`jbevo.models.road_tilt.RoadTilt.level`), and on the run with the IMU blocks that lie on
 the published file's dropout lines marked missing (``IMU dropouts missing``:
-:func:`jbevo.data.kitti.without_dropouts`; the preset's attitude then widens through them by
+:func:`jbevo.data.kitti.without_dropouts`, rows taken at the calibration's time offset; the
+preset's attitude then widens through the blocks left without any sample by
 :data:`jbevo.models.presets.STREET_GAP_RATE_STD`, or, ``attitude not widened``, only holds). Learned rows fit on one half of a run and are scored on the other
 (both directions; ``--seeds`` seeds of the window order, mean and standard deviation):
 ``street, calibrated`` learns the road view's pitch, roll and height (3 numbers),
@@ -110,10 +111,17 @@ TIMED = ("street + robust bands", "street + robust bands, keyframes")
 # ------------------------------------------------------------------ data
 
 
+@functools.cache
+def run_calibration(root: Path):
+    """The IMU calibration of the runs' recording day, fitted without the runs' drives."""
+    poses, imu = root / "kitti_odom" / "gt_poses", root / "kitti_odom" / "imu"
+    return kitti_imu.day_calibration(str(poses), str(imu), CALIBRATION_DAY, exclude=tuple(RUNS))
+
+
 def load_runs(root: Path) -> dict[str, tuple[sq.Sequence, sq.Sequence]]:
     """Each run as shipped and with its calibrated IMU and levelled truth."""
     poses, imu = root / "kitti_odom" / "gt_poses", root / "kitti_odom" / "imu"
-    calibration = kitti_imu.day_calibration(str(poses), str(imu), CALIBRATION_DAY, exclude=tuple(RUNS))
+    calibration = run_calibration(root)
     return {
         name: kitti_imu.read_calibrated_run(root / "realdata" / folder, poses, imu, name, calibration)
         for name, folder in RUNS.items()
@@ -199,8 +207,8 @@ def segments(increments, pitch_roll, seq: sq.Sequence) -> dict[str, dict]:
 
 
 #: The data a hand-set row runs on: the run as shipped, with the calibrated IMU and levelled truth,
-#: and the latter with the IMU blocks on a dropout's straight line marked missing
-#: (:func:`jbevo.data.kitti.without_dropouts`).
+#: and the latter with the IMU rows on a dropout's straight line marked missing
+#: (:func:`jbevo.data.kitti.without_dropouts`, at the calibration's time offset).
 SHIPPED, CALIBRATED, DROPOUTS_MISSING = "as shipped", "calibrated", "calibrated, dropouts missing"
 
 
@@ -464,11 +472,9 @@ def main() -> None:
     runs = load_runs(Path(root))
     imu = Path(root) / "kitti_odom" / "imu"
     # The frames whose published IMU is a straight line over an OXTS dropout (frames the OXTS unit did not record).
-    interpolated = {
-        name: kitti.interpolated_frames(kitti.read_kitti_imu(imu / f"{name}.mat", np.asarray(seq.frame_times)))
-        for name, (_, seq) in runs.items()
-    }
-    dropouts = {name: np.flatnonzero(flags) for name, flags in interpolated.items()}
+    published = {name: kitti.read_kitti_imu(imu / f"{name}.mat", np.asarray(seq.frame_times)) for name, (_, seq) in runs.items()}
+    dropouts = {name: np.flatnonzero(kitti.interpolated_frames(stream)) for name, stream in published.items()}
+    offset = run_calibration(Path(root)).time_offset_s
     table: dict[str, dict] = {}
     learned_params: dict[str, dict] = {}
     selection: dict[str, dict] = {}
@@ -483,7 +489,8 @@ def main() -> None:
         print(f"run {name}: {seq.num_frames} frames", flush=True)
         trajectories = {}
         street_out = None
-        data_for = {SHIPPED: raw, CALIBRATED: seq, DROPOUTS_MISSING: kitti.without_dropouts(seq, interpolated[name])}
+        marked = kitti.without_dropouts(seq, kitti.dropout_spans(published[name]), time_offset_s=offset)
+        data_for = {SHIPPED: raw, CALIBRATED: seq, DROPOUTS_MISSING: marked}
         for label, (model, data_key) in hand_set(seq.imu_dt).items():
             data = data_for[data_key]
             out = run_bevo(model, data, warm_start=True)
