@@ -149,8 +149,9 @@ class SpeedAidedAttitude(FilterNoise):
     and roll variances grow by ``(S dt gap_rate_std)^2`` (``S`` samples of ``dt``): the rates the
     gyro did not see are taken as unknown, about ``gap_rate_std`` in size, constant through a
     frame and independent from frame to frame. Off, a missing stretch leaves the belief as
-    certain as a measured one, and the measurements after it barely move it. Blocks with some valid rows (padding) are
-    predicted as before. The smoother (:meth:`smooth`) does not add it.
+    certain as a measured one, and the measurements after it barely move it. Blocks with some
+    valid rows (padding) are predicted as before; ``widen=False`` (BEVO's frame 0) skips it. The
+    smoother (:meth:`smooth`) does not add it.
 
     Example::
 
