@@ -75,7 +75,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from scipy.io import loadmat
 
 from jbevo.data import kitti
 from jbevo.data import sequence as sq
@@ -111,9 +110,9 @@ TIMED = ("street + robust bands", "street + robust bands, keyframes")
 # ------------------------------------------------------------------ data
 
 
-@functools.cache
 def run_calibration(root: Path):
-    """The IMU calibration of the runs' recording day, fitted without the runs' drives."""
+    """The IMU calibration of the runs' recording day, fitted without the runs' drives (cached
+    per process by :func:`jbevo.inertial.kitti_imu.day_calibration`)."""
     poses, imu = root / "kitti_odom" / "gt_poses", root / "kitti_odom" / "imu"
     return kitti_imu.day_calibration(str(poses), str(imu), CALIBRATION_DAY, exclude=tuple(RUNS))
 
@@ -246,18 +245,16 @@ def hand_set(imu_dt: float) -> dict[str, tuple[Bevo, str]]:
     }
 
 
-def training_tilt_rate_rms(imu: Path) -> float:
+def training_tilt_rate_rms(root: Path) -> float:
     """The RMS (deg/s) of the roll and pitch rates (the published gyro's x and y) over the KITTI
     training drives with an IMU file that no real run here comes from: the rate
     :data:`jbevo.models.presets.STREET_GAP_RATE_STD` assumes through a missing gyro block."""
+    poses, imu = root / "kitti_odom" / "gt_poses", root / "kitti_odom" / "imu"
     squares, count = 0.0, 0
     for name in KITTI_TRAIN:
-        path = imu / f"{name}.mat"
-        if name in RUNS or not path.is_file():
+        if name in RUNS or not (imu / f"{name}.mat").is_file():
             continue
-        frames = (len(loadmat(path)["imu_data_interp"]) - 1) // kitti_imu.SAMPLES_PER_FRAME + 1
-        stream = kitti.read_kitti_imu(path, np.arange(frames) * kitti_imu.FRAME_STEP_S)
-        rates = np.degrees(np.asarray(stream.gyro, float)[:, :2])
+        rates = np.degrees(np.asarray(kitti_imu.calibration_drive(poses, imu, name).imu.gyro, float)[:, :2])
         squares, count = squares + float(np.sum(rates**2)), count + rates.size
     return float(np.sqrt(squares / count))
 
@@ -561,7 +558,7 @@ def main() -> None:
             },
             "runs": table,
             "imu_interpolated_frames": {name: frames.tolist() for name, frames in dropouts.items()},
-            "training_tilt_rate_rms_deg_s": training_tilt_rate_rms(imu),
+            "training_tilt_rate_rms_deg_s": training_tilt_rate_rms(Path(root)),
             "gyro_alone_drift_deg": {
                 name: {"frames": GYRO_WINDOW, "from_frame": gyro_alone_drift(seq)} for name, (_, seq) in runs.items()
             },
