@@ -1128,8 +1128,9 @@ def street_oracle_rows(drives: dict) -> list[tuple[str, str]]:
 
 def street_oracle() -> str:
     """The street preset, the preset with the camera's mounting known, on a level road and with
-    its road tilt not measured by the speed, and its odometry without bands at the preset's attitude, at the true attitude against the road and at
-    the true attitude on one axis at a time, on KITTI 09 and 10 in the street and the flat world."""
+    its road tilt not measured by the speed, and its odometry without bands at the preset's
+    attitude, at the true attitude against the road and at the true attitude on one axis at a
+    time, on KITTI 09 and 10 in the street and the flat world."""
     rec = record(STREET_ORACLE)
     d, piece = rec["drives"], f"{rec['settings']['piece_m']:.0f} m"
     drives = [name for name in d if name != "pooled"]
