@@ -1,7 +1,7 @@
 """The forward speed, travel and bias filter: the IMU block integrated exactly (gravity's share at
-the pitch, the bias, missing samples, the travel reset per frame), DPC's increment weighted by its
-relative noise and robustly, a constant bias found from DPC's increments, and its arguments
-checked."""
+the pitch, the bias, missing samples, the travel reset per frame), DPC's increment weighted
+linearly, DPC's sum kept over a long drive whatever its errors' skew, a constant bias found from
+DPC's increments, and its arguments checked."""
 
 import jax
 import jax.numpy as jnp
@@ -105,21 +105,39 @@ def test_dpc_increments_find_a_constant_bias():
     assert float(unbiased.mean[0]) - 10.0 > 0.5 and float(ForwardFusion.travel(unbiased)) - 1.0 > 0.05
 
 
-def test_dpc_pulls_the_travel_by_its_relative_noise_and_robustly():
+def test_dpc_pulls_the_travel_linearly():
     fusion = ForwardFusion.create(accel_std=0.5, displacement_std=0.05)
     state = fusion.initial(jnp.float64(10.0), 1.0, jnp.float64)
     predicted = fusion.predict(state, block(0.0), jnp.float64(0.0), DT)  # travel 1 m, 0.1 m uncertain
-    near = fusion.update(predicted, jnp.float64(1.02))
-    far = fusion.update(predicted, jnp.float64(1.5))
-    pull = lambda post, z: float((ForwardFusion.travel(post) - 1.0) / (z - 1.0))
-    # Near: the gain of a 5 cm (5 %) measurement against a 10 cm prediction, plus the robust term.
-    prior, noise = float(predicted.cov[1, 1]), (0.05 * 1.02) ** 2 + 0.02**2
-    assert pull(near, 1.02) == pytest.approx(prior / (prior + noise), rel=1e-6)  # float32 parameters
-    assert pull(far, 1.5) < 0.5 * pull(near, 1.02)  # a gross increment loses its weight
+    pull = lambda z: float((ForwardFusion.travel(fusion.update(predicted, jnp.float64(z))) - 1.0) / (z - 1.0))
+    # The gain of a 5 cm measurement against a 10 cm prediction, whatever the increment: above or
+    # below the prediction, near or gross.
+    prior = float(predicted.cov[1, 1])
+    for z in (1.02, 0.98, 1.5, 0.5):
+        assert pull(z) == pytest.approx(prior / (prior + 0.05**2), rel=1e-6)  # float32 parameters
     # The speed moves with the travel (they are correlated through the block).
-    assert float(near.mean[0]) > 10.0
+    assert float(ForwardFusion.travel(fusion.update(predicted, jnp.float64(1.02)))) > 1.0
+    assert float(fusion.update(predicted, jnp.float64(1.02)).mean[0]) > 10.0
     for skipped in (fusion.update(predicted, jnp.float64(np.nan)), fusion.update(predicted, jnp.float64(1.2), use=False)):
         np.testing.assert_array_equal(skipped.mean, predicted.mean)
+
+
+def test_the_fused_distance_keeps_dpcs_over_a_long_drive():
+    """At a steady 10 m/s, DPC's increments 4 % short with skewed scatter (most a little low, a few
+    far high: 8 cm RMS): over 2000 frames the fused travel sums to DPC's within 0.1 % and scatters
+    less about its own mean than DPC does."""
+    rng = np.random.default_rng(3)
+    skewed = rng.exponential(0.08, 2000) - 0.08
+    increments = 0.96 + skewed
+    fusion = ForwardFusion.create()
+    frame = jax.jit(lambda s, z: fusion.update(fusion.predict(s, block(0.0), jnp.float64(0.0), DT), z))
+    state, fused = fusion.initial(jnp.float64(10.0), WARM_SPEED_STD, jnp.float64, fusion.bias_std), []
+    for z in increments:
+        state = frame(state, jnp.float64(z))
+        fused.append(float(ForwardFusion.travel(state)))
+    fused = np.asarray(fused[200:])  # after the warm start's 1 m/frame has given way to DPC's
+    assert fused.mean() == pytest.approx(increments[200:].mean(), rel=1e-3)
+    assert fused.std() < 0.5 * increments[200:].std()
 
 
 def test_cold_start_is_vague_and_arguments_are_checked():

@@ -60,16 +60,17 @@ def test_robust_bands_do_not_diverge_on_the_slow_start_of_07(runs):
 
 
 def test_forward_fusion_holds_the_real_06_motion_per_frame(runs):
-    """The accelerometer's speed fused with DPC's forward increment: on real 06 the per-frame
-    motion error, almost all along the heading with DPC alone, falls below 5 cm; the turn and the
-    lateral motion are DPC's and the gyro's as before."""
+    """The accelerometer's speed fused with DPC's forward increment in the street preset: on real 06
+    the per-frame motion error, almost all along the heading with DPC alone, falls below 5 cm; the
+    turn and the lateral motion are DPC's and the gyro's as before. (The fusion keeps DPC's slow
+    scale errors, which the bands' road tilt corrects, and removes the scatter about them.)"""
     _, seq = runs["06"]
     truth = np.asarray(relative_motion(seq))[1:]
-    alone = run_bevo(street_model(seq.imu_dt, bands=False), seq, warm_start=True)
-    fused = run_bevo(street_model(seq.imu_dt, bands=False, forward_fusion=True), seq, warm_start=True)
+    alone = run_bevo(street_model(seq.imu_dt), seq, warm_start=True)
+    fused = run_bevo(street_model(seq.imu_dt, forward_fusion=True), seq, warm_start=True)
 
     def motion_cm(out):
         return 100 * float(np.sqrt(np.mean(np.sum((np.asarray(out.increments)[1:, :2] - truth[:, :2]) ** 2, axis=1))))
 
-    assert motion_cm(alone) > 8.0 and motion_cm(fused) < 5.0
+    assert motion_cm(alone) > 7.0 and motion_cm(fused) < 5.0
     np.testing.assert_array_equal(fused.increments[:, 1:], alone.increments[:, 1:])
