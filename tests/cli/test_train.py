@@ -96,20 +96,26 @@ def test_resume_from_a_corrupt_checkpoint_fails_clearly(tmp_path, capsys):
 
 
 def test_the_street_model_trains_in_the_street_world_and_evaluates(tmp_path, capsys):
-    """``--model street`` trains the street preset's parts (the road view, the yaw fusion) and its
-    checkpoint brings them back to ``evaluate``; ``--world street`` renders the street world."""
+    """``--model street --forward-fusion`` trains the street preset's parts (the road view, the yaw
+    fusion) and the forward fusion's, and its checkpoint brings them back to ``evaluate``;
+    ``--world street`` renders the street world. Hand-set, ``evaluate`` takes the same options."""
     out = tmp_path / "street"
-    assert train.main([*TINY, "--epochs", "1", "--model", "street", "--world", "street", "--out", str(out)]) == 0
+    args = [*TINY, "--epochs", "1", "--model", "street", "--forward-fusion", "--world", "street", "--out", str(out)]
+    assert train.main(args) == 0
     model = checkpoint.load_model(out / "last.ckpt", Bevo)
-    assert model.road is not None and model.yaw_fusion is not None
-    assert json.loads((out / "metrics.json").read_text())["learnable_parameters"] > 14
+    assert model.road is not None and model.yaw_fusion is not None and model.forward is not None
+    assert json.loads((out / "metrics.json").read_text())["learnable_parameters"] > 14 + 3
     ev = tmp_path / "street_eval"
     assert evaluate.main(["--checkpoint", str(out), *EVALUATE, "--world", "street", "--out", str(ev)]) == 0
     metrics = json.loads((ev / "metrics.json").read_text())
-    assert metrics["road_view"] and metrics["world"] == "street" and metrics["overall"]["ate_m"] >= 0
-    hand = tmp_path / "street_hand_set"
-    assert evaluate.main([*EVALUATE, "--model", "street", "--out", str(hand)]) == 0
-    assert json.loads((hand / "metrics.json").read_text())["road_view"]
+    assert (
+        metrics["road_view"] and metrics["forward_fusion"] and metrics["world"] == "street" and metrics["overall"]["ate_m"] >= 0
+    )
+    for options, fused in (([], False), (["--forward-fusion"], True)):
+        hand = tmp_path / f"street_hand_set_{fused}"
+        assert evaluate.main([*EVALUATE, "--model", "street", *options, "--out", str(hand)]) == 0
+        metrics = json.loads((hand / "metrics.json").read_text())
+        assert metrics["road_view"] and metrics["forward_fusion"] is fused
 
 
 def test_evaluate_writes_poses_plots_and_metrics(evaluation):

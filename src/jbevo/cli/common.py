@@ -213,7 +213,8 @@ MODELS = ("bevo", "street")
 
 
 def model_option() -> argparse.ArgumentParser:
-    """A parent parser with ``--model``: BEVO as the paper has it, or the street preset."""
+    """A parent parser with ``--model`` (BEVO as the paper has it, or the street preset) and
+    ``--forward-fusion``."""
     p = argparse.ArgumentParser(add_help=False)
     p.add_argument(
         "--model",
@@ -222,14 +223,24 @@ def model_option() -> argparse.ArgumentParser:
         help="bevo (the paper's model) or street (jbevo.models.presets.street_model: camera against the road, road "
         "corridor, the gyro's turn fused with DPC's; with --bands the robust bands on the road's grade)",
     )
+    p.add_argument(
+        "--forward-fusion",
+        action="store_true",
+        help="hand-set model with the forward motion fused from the accelerometer and DPC "
+        "(jbevo.models.forward_fusion; a checkpoint brings its own)",
+    )
     return p
 
 
-def hand_set_model(kind: str, grid: BevGrid, imu_dt: float, bands: bool, attitude: str = "filter") -> Bevo:
-    """The hand-set model of ``--model`` on ``grid``, with or without the band geometry."""
+def hand_set_model(
+    kind: str, grid: BevGrid, imu_dt: float, bands: bool, attitude: str = "filter", forward_fusion: bool = False
+) -> Bevo:
+    """The hand-set model of ``--model`` on ``grid``, with or without the band geometry and the
+    forward fusion."""
     if kind == "street":
-        return dataclasses.replace(street_model(imu_dt, grid, bands=bands), attitude_source=attitude)
-    return Bevo.create(grid, imu_dt, attitude, bands=bands)
+        model = street_model(imu_dt, grid, bands=bands, forward_fusion=forward_fusion)
+        return dataclasses.replace(model, attitude_source=attitude)
+    return Bevo.create(grid, imu_dt, attitude, bands=bands, forward_fusion=forward_fusion)
 
 
 def seed_option(default: int = 0, help: str = "random seed") -> argparse.ArgumentParser:

@@ -45,11 +45,19 @@ from jbevo.training import checkpoint, distributed
 ATTITUDE_SOURCES = ("filter", "zero", "accel", "truth")
 
 
-def load_model(path: Path | None, grid: BevGrid, imu_dt: float, attitude: str, bands: bool = False, kind: str = "bevo") -> Bevo:
+def load_model(
+    path: Path | None,
+    grid: BevGrid,
+    imu_dt: float,
+    attitude: str,
+    bands: bool = False,
+    kind: str = "bevo",
+    forward_fusion: bool = False,
+) -> Bevo:
     """The hand-set model of ``kind`` (``path`` None; :func:`jbevo.cli.common.hand_set_model`) or a
     checkpoint's (its own grid, bands and parts), projecting with ``attitude``."""
     if path is None:
-        return common.hand_set_model(kind, grid, imu_dt, bands, attitude)
+        return common.hand_set_model(kind, grid, imu_dt, bands, attitude, forward_fusion)
     return dataclasses.replace(checkpoint.load_model(path, Bevo), attitude_source=attitude)
 
 
@@ -115,7 +123,7 @@ def evaluate(args: argparse.Namespace) -> int:
         lengths = segment_lengths(args.dataset, args.frames)
         imu_dt = seqs[0].imu_dt if np.isfinite(seqs[0].imu_dt) else 0.01
         with common.reading(f"the checkpoint {args.checkpoint}"):
-            model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands, args.model)
+            model = load_model(args.checkpoint, args.grid, imu_dt, args.attitude, args.bands, args.model, args.forward_fusion)
     outputs, fps = run_many(model, seqs, args.warm_start)
     # Process 0 writes and scores every sequence: the trajectories and the truth (not the
     # images) of the others' shares come to it.
@@ -155,6 +163,7 @@ def evaluate(args: argparse.Namespace) -> int:
             "attitude": args.attitude,
             "bands": model.bands is not None,
             "road_view": model.road is not None,  # the street model's parts (--model street or its checkpoint)
+            "forward_fusion": model.forward is not None,
             "world": args.world,
             "warm_start": args.warm_start,
             "devices": [str(d) for d in jax.devices()],

@@ -145,7 +145,7 @@ def train(args: argparse.Namespace) -> int:
         imu_dt = train_seqs[0].imu_dt if np.isfinite(train_seqs[0].imu_dt) else 0.01
         with common.reading(f"the run in {args.out}"):
             model, params, static, optimizer, opt_state, progress = start_run(
-                common.hand_set_model(args.model, args.grid, imu_dt, args.bands),
+                common.hand_set_model(args.model, args.grid, imu_dt, args.bands, forward_fusion=args.forward_fusion),
                 args.out,
                 args.lr,
                 args.clip,
@@ -161,7 +161,9 @@ def train(args: argparse.Namespace) -> int:
         f"over {parallel.size} device(s) in {jax.process_count()} process(es)"
     )
 
-    hand_set = common.hand_set_model(args.model, model.grid, imu_dt, model.bands is not None)
+    hand_set = common.hand_set_model(
+        args.model, model.grid, imu_dt, model.bands is not None, forward_fusion=model.forward is not None
+    )
     val_warm = args.val_start == "warm"
     before = validate(hand_set, val_seqs, lengths, args.val_window, val_warm)
     print(f"validation before training (hand-set): {format_scores(before)}")
