@@ -9,10 +9,11 @@ per-frame motion error split along the heading and across it (``along_cm``, ``ac
 Rows: the preset and the preset with forward fusion, both warm-started (the truth's pitch, roll
 and speed at frame 0, as ``real_kitti.py``'s rows) and both cold (the accelerometer's tilt, speed
 zero); forward fusion without its bias state, and with the update it had before its linear one
-(:class:`RobustRelativeFusion`: DPC's noise 5 % of the increment, robust); and a sweep of the fusion's accelerometer noise (``accel_std``), which was looked at on
-these runs before the hand-set value was written down: it says how much the rows depend on that
-choice, not which value is best. The warm fusion rows also run on the street world's copies of the
-runs (``benchmarks/street_world.py``'s street world: the real IMU, truth and frame times, rendered
+(:class:`RobustRelativeFusion`: DPC's noise 5 % of the increment, robust); and a sweep of the
+fusion's accelerometer noise (``accel_std``), which was looked at on these runs before the
+hand-set value was written down: it says how much the rows depend on that choice, not which
+value is best. The warm rows but the sweep also run on the street world's copies of the runs
+(``benchmarks/street_world.py``'s street world: the real IMU, truth and frame times, rendered
 images).
 
 Long drives: the street world's KITTI 09 and 10 whole, rendered as
