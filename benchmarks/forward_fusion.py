@@ -24,10 +24,13 @@ bias's walk among 0.005, 0.02 and 0.05 m/s^2 per square root of a second, beside
 the street world's KITTI 00 and 08 (the first 800 frames, rendered with seed 100; a training and
 the validation drive of that experiment; devkit errors per drive and pooled), where the hand-set
 value (:data:`jbevo.models.forward_fusion.BIAS_WALK`) and the linear update were chosen.
+``held_out``: the long-drive rows on the street world's KITTI 02 and 05, which took no part in
+forward fusion's design, run as the sweep's drives are (the first 800 frames, seed 100).
 
 Keys: ``runs[<run>][<variant>][<metric>]``, ``street_world[<run>][<variant>][<metric>]`` (``<run>``
 as in ``real_kitti.json``), ``kitti_street[<drive>][<variant>][<metric>]`` (``<drive>`` 09, 10 or
-pooled) and ``bias_walk_sweep[<drive>][<variant>][<metric>]``.
+pooled), ``bias_walk_sweep[<drive>][<variant>][<metric>]`` and
+``held_out[<drive>][<variant>][<metric>]`` (``<drive>`` also pooled).
 
     JBEVO_REFERENCE_DATA=../shared/data python benchmarks/forward_fusion.py
 """
@@ -75,6 +78,10 @@ BIAS_WALK_SWEEP = (0.005, 0.02, 0.05)
 #: sweep's drives, frames and seed.
 LONG_DRIVES, LONG_SEED = ("09", "10"), 900
 SWEEP_DRIVES, SWEEP_FRAMES, SWEEP_SEED = ("00", "08"), 800, 100
+
+#: Drives that took no part in forward fusion's design (training drives of the KITTI-style
+#: experiment), run as the sweep's drives are: the first 800 frames, seed 100.
+HELD_OUT_DRIVES = ("02", "05")
 
 #: The KITTI-style experiment's BEV grid.
 KITTI_GRID = BevGrid(0.1, (256, 256), near=4.0)
@@ -224,6 +231,7 @@ def main() -> None:
             put("street_world", name, label, run_bevo(models[label][0], copy, warm_start=True), seq)
     tables["kitti_street"] = long_drives(Path(root), LONG_DRIVES, 0, LONG_SEED, long_models, devkit=True)
     tables["bias_walk_sweep"] = long_drives(Path(root), SWEEP_DRIVES, SWEEP_FRAMES, SWEEP_SEED, sweep_models, devkit=True)
+    tables["held_out"] = long_drives(Path(root), HELD_OUT_DRIVES, SWEEP_FRAMES, SWEEP_SEED, long_models, devkit=True)
     settings = {
         "accel_std": float(jnp.exp(ForwardFusion.create().log_accel_std)),
         "displacement_std": float(jnp.exp(ForwardFusion.create().log_displacement_std)),

@@ -1061,7 +1061,18 @@ def forward_fusion_street_world() -> str:
 def forward_fusion_long() -> str:
     """The street world's KITTI 09 and 10, whole: the devkit's errors per drive and pooled, and
     the per-frame metrics per drive."""
-    d = record(FORWARD_FUSION)["kitti_street"]
+    return _forward_devkit("kitti_street")
+
+
+def forward_fusion_held_out() -> str:
+    """The same on the street world's KITTI 02 and 05 (first frames)."""
+    return _forward_devkit("held_out")
+
+
+def _forward_devkit(section: str) -> str:
+    """The forward-fusion record's ``section`` of devkit-scored drives: the devkit's errors per
+    drive and pooled, and the per-frame metrics per drive."""
+    d = record(FORWARD_FUSION)[section]
     drives = [name for name in d if name != "pooled"]
     rows = []
     for model in d["pooled"]:
@@ -1359,6 +1370,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "forward_fusion_sweep": forward_fusion_sweep,
     "forward_fusion_street_world": forward_fusion_street_world,
     "forward_fusion_long": forward_fusion_long,
+    "forward_fusion_held_out": forward_fusion_held_out,
     "forward_fusion_bias_sweep": forward_fusion_bias_sweep,
     "street_drives": street_drives,
     "street_oracle": street_oracle,
