@@ -1089,20 +1089,9 @@ def _forward_devkit(section: str) -> str:
 
 
 def forward_fusion_bias_sweep() -> str:
-    """The bias walk sweep on the street world's KITTI 00 and 08 (first frames): the devkit's
-    t_err per drive and pooled, and the per-frame metrics per drive."""
-    d = record(FORWARD_FUSION)["bias_walk_sweep"]
-    drives = [name for name in d if name != "pooled"]
-    rows = []
-    for model in d["pooled"]:
-        cells = [num(d[name][model]["t_err_pct"], 2) for name in drives] + [num(d["pooled"][model]["t_err_pct"], 2)]
-        for name in drives:
-            m = d[name][model]
-            cells += [num(m["motion_cm"], 1), num(m["distance_ratio"], 3)]
-        rows.append([model] + cells)
-    header = ["model"] + [f"{name}: t_err (%)" for name in drives] + ["pooled t_err (%)"]
-    header += [f"{name}: {c}" for name in drives for c in ("motion (cm)", "distance ratio")]
-    return table(header, rows)
+    """The bias walk sweep on the street world's KITTI 00 and 08 (first frames), laid out as the
+    long drives' table."""
+    return _forward_devkit("bias_walk_sweep")
 
 
 STREET_DRIVES = "benchmarks/results/street_drives.json"
