@@ -1168,6 +1168,84 @@ def street_oracle_projection() -> str:
     return table(header, rows)
 
 
+def street_oracle_slow_fast() -> str:
+    """Per world, the pooled t_err of the bandless odometry at the true pitch plus the slow part of
+    the preset's pitch error, plus its fast part, at the true pitch and at the preset's attitude."""
+    d = record(STREET_ORACLE)["drives"]["pooled"]
+    rows = {
+        "the slow part": "odometry at the true pitch plus the preset's slow pitch error, the preset's roll",
+        "the fast part": "odometry at the true pitch plus the preset's fast pitch error, the preset's roll",
+        "no error (true pitch)": "odometry at the true pitch against the road, the preset's roll",
+        "the whole error (the preset's attitude)": "odometry at the preset's attitude",
+    }
+    return "; ".join(
+        f"{world}: " + ", ".join(f"{label} {d[world][model]['t_err_pct']:.2f} %" for label, model in rows.items())
+        for world in ("street world", "flat world")
+    )
+
+
+BAND_SLOPE = "benchmarks/results/band_slope.json"
+
+
+def band_slope() -> str:
+    """The bands' slope read as a pitch error and the full registration's forward motion over the
+    true travel, per drive, with the pair projected at the true attitude against the road, with a
+    pitch error both BEVs share and with the earlier BEV's pitch alone off."""
+    d = record(BAND_SLOPE)["drives"]
+    rows = [
+        [f"{name}: {condition}"]
+        + [num(v[k], 3) for k in ("median_deg", "robust_scatter_deg", "std_deg")]
+        + [num(100 * v["share_beyond_1_deg"], 1), num(v["forward_over_true_median"], 3)]
+        for name, drive in d.items()
+        for condition, v in sorted(drive["conditions"].items(), key=lambda item: (item[0] != "exact", item[0]))
+    ]
+    header = ["drive: BEV pair", "slope as pitch: median (deg)", "robust scatter (deg)", "std (deg)"]
+    header += ["beyond 1 deg (%)", "forward motion / true (median)"]
+    return table(header, rows)
+
+
+def band_slope_confidence() -> str:
+    """The slope's scatter at the true attitude per fifth of the pairs by DPC's confidence."""
+    d = record(BAND_SLOPE)["drives"]
+    rows = [
+        [f"{name}: {num(b['confidence'][0], 2)}-{num(b['confidence'][1], 2)}"]
+        + [num(b[k], 3) for k in ("median_deg", "robust_scatter_deg", "std_deg")]
+        + [num(100 * b["share_beyond_1_deg"], 1)]
+        for name, drive in d.items()
+        for b in drive["by_confidence"]
+    ]
+    header = ["drive: confidence", "median (deg)", "robust scatter (deg)", "std (deg)", "beyond 1 deg (%)"]
+    return table(header, rows)
+
+
+def band_slope_tilt_change() -> str:
+    """Per drive, the per-frame change of the camera's pitch against the road and of the road tilt."""
+    d = record(BAND_SLOPE)["drives"]
+    return "; ".join(
+        f"{name}: {v['tilt']['road_tilt_change_rms_deg']:.3f} deg (the camera's pitch against the road:"
+        f" {v['tilt']['camera_pitch_change_rms_deg']:.3f} deg)"
+        for name, v in d.items()
+    )
+
+
+def band_slope_response() -> str:
+    """Per drive, how much more the slope and the forward motion move for the earlier BEV's pitch
+    alone than for the same pitch error shared by both BEVs (against the exact pair)."""
+    rec = record(BAND_SLOPE)
+    offset = rec["settings"]["offset_deg"]
+    parts = []
+    for name, v in rec["drives"].items():
+        c = v["conditions"]
+        exact, both, earlier = (c[k] for k in ("exact", f"both +{offset} deg", f"earlier +{offset} deg"))
+        parts.append(
+            f"{name}: slope {both['median_deg'] - exact['median_deg']:+.3f} against"
+            f" {earlier['median_deg'] - exact['median_deg']:+.3f} deg, forward motion"
+            f" {100 * (both['forward_over_true_median'] - exact['forward_over_true_median']):+.1f} against"
+            f" {100 * (earlier['forward_over_true_median'] - exact['forward_over_true_median']):+.1f} %"
+        )
+    return "; ".join(parts)
+
+
 def street_oracle_uncoupled() -> str:
     """The street preset's pooled t_err against its road tilt's without the speed's share, per
     world, and the worst drive's of the latter."""
@@ -1364,6 +1442,8 @@ TABLES: dict[str, Callable[[], str]] = {
     "street_drives": street_drives,
     "street_oracle": street_oracle,
     "street_oracle_projection": street_oracle_projection,
+    "band_slope": band_slope,
+    "band_slope_confidence": band_slope_confidence,
     "parallel_in_time": parallel_in_time,
     "batch_last": batch_last,
     "attitude_synthetic": attitude_synthetic,
@@ -1412,6 +1492,9 @@ TABLES: dict[str, Callable[[], str]] = {
 }
 
 VALUES: dict[str, Callable[[], str]] = {
+    "band_slope_tilt_change": band_slope_tilt_change,
+    "street_oracle_slow_fast": street_oracle_slow_fast,
+    "band_slope_response": band_slope_response,
     "attitude_world_tilt": attitude_world_tilt,
     "ukf_agreement": ukf_agreement,
     "ukf_batch_last_vs_dynamax": ukf_batch_last_vs_dynamax,
