@@ -164,8 +164,8 @@ def split_pitch(projection: np.ndarray, road: np.ndarray, preset: Bevo, street: 
     pitch against the road plus the slow part of the ``preset``'s pitch error (its mean over a
     centred window of :data:`SLOW_WINDOW` frames, the ends padded with the end values), or with
     ``slow`` False plus the rest of that error; the roll the ``preset``'s."""
-    out = mixed(projection, road, preset, street, 1)
-    error = out[:, 0] - road[:, 0]
+    out = mixed(projection, road, preset, street, 0)
+    error = mixed(projection, road, preset, street, 1)[:, 0] - road[:, 0]
     half = SLOW_WINDOW // 2
     smooth = np.convolve(np.pad(error, half, mode="edge"), np.full(SLOW_WINDOW, 1.0 / SLOW_WINDOW), "valid")
     out[:, 0] = road[:, 0] + (smooth if slow else error - smooth)

@@ -1218,30 +1218,54 @@ def band_slope_confidence() -> str:
     return table(header, rows)
 
 
+def _band_slope_responses(name: str, rec: dict) -> tuple[float, float]:
+    """The slope's response (degrees, against the exact pair) to the shared offset and to the
+    earlier BEV's alone, on drive ``name``."""
+    c, offset = rec["drives"][name]["conditions"], rec["settings"]["offset_deg"]
+    exact = c["exact"]["median_deg"]
+    return c[f"both +{offset} deg"]["median_deg"] - exact, c[f"earlier +{offset} deg"]["median_deg"] - exact
+
+
 def band_slope_tilt_change() -> str:
-    """Per drive, the per-frame change of the camera's pitch against the road and of the road tilt."""
+    """Per drive, the per-frame change of the road tilt (RMS over the frames, over the pairs, and
+    of its 10-frame mean) and of the camera's pitch against the road."""
     d = record(BAND_SLOPE)["drives"]
     return "; ".join(
-        f"{name}: {v['tilt']['road_tilt_change_rms_deg']:.3f} deg (the camera's pitch against the road:"
-        f" {v['tilt']['camera_pitch_change_rms_deg']:.3f} deg)"
+        f"{name}: {v['tilt']['road_tilt_change_rms_deg']:.3f} deg over the frames, {v['tilt']['road_tilt_change_rms_on_pairs_deg']:.3f}"
+        f" over the pairs, {v['tilt']['road_tilt_change_10_frame_mean_rms_deg']:.3f} averaged over 10 frames (the camera's pitch"
+        f" against the road: {v['tilt']['camera_pitch_change_rms_deg']:.3f} deg)"
         for name, v in d.items()
     )
 
 
+def band_slope_phantom() -> str:
+    """Per drive, the pitch error the slope reads from the road tilt's change over a pair: that
+    change's RMS over the pairs times the slope's response per degree of the earlier BEV's pitch."""
+    rec = record(BAND_SLOPE)
+    offset = rec["settings"]["offset_deg"]
+    parts = []
+    for name, v in rec["drives"].items():
+        per_degree = abs(_band_slope_responses(name, rec)[1]) / offset
+        parts.append(f"{name}: {per_degree * v['tilt']['road_tilt_change_rms_on_pairs_deg']:.2f} deg")
+    return ", ".join(parts)
+
+
 def band_slope_response() -> str:
-    """Per drive, how much more the slope and the forward motion move for the earlier BEV's pitch
-    alone than for the same pitch error shared by both BEVs (against the exact pair)."""
+    """Per drive, how much the slope and the forward motion move for the shared offset and for the
+    earlier BEV's alone (against the exact pair), the ratio of the two slope responses and the
+    band model's."""
     rec = record(BAND_SLOPE)
     offset = rec["settings"]["offset_deg"]
     parts = []
     for name, v in rec["drives"].items():
         c = v["conditions"]
-        exact, both, earlier = (c[k] for k in ("exact", f"both +{offset} deg", f"earlier +{offset} deg"))
+        exact, both, earlier = (
+            c[k]["forward_over_true_median"] for k in ("exact", f"both +{offset} deg", f"earlier +{offset} deg")
+        )
+        shared, alone = _band_slope_responses(name, rec)
         parts.append(
-            f"{name}: slope {both['median_deg'] - exact['median_deg']:+.3f} against"
-            f" {earlier['median_deg'] - exact['median_deg']:+.3f} deg, forward motion"
-            f" {100 * (both['forward_over_true_median'] - exact['forward_over_true_median']):+.1f} against"
-            f" {100 * (earlier['forward_over_true_median'] - exact['forward_over_true_median']):+.1f} %"
+            f"{name}: slope {shared:+.3f} against {alone:+.3f} deg ({alone / shared:.1f} times; the band model"
+            f" {v['model_ratio_median']:.1f}), forward motion {100 * (both - exact):+.1f} against {100 * (earlier - exact):+.1f} %"
         )
     return "; ".join(parts)
 
@@ -1494,6 +1518,7 @@ TABLES: dict[str, Callable[[], str]] = {
 VALUES: dict[str, Callable[[], str]] = {
     "band_slope_tilt_change": band_slope_tilt_change,
     "street_oracle_slow_fast": street_oracle_slow_fast,
+    "band_slope_phantom": band_slope_phantom,
     "band_slope_response": band_slope_response,
     "attitude_world_tilt": attitude_world_tilt,
     "ukf_agreement": ukf_agreement,
