@@ -1187,15 +1187,19 @@ def street_oracle_slow_fast() -> str:
 BAND_SLOPE = "benchmarks/results/band_slope.json"
 
 
+def _scatter_cells(v: dict) -> list[str]:
+    """A ``band_slope.json`` scatter's median, robust scatter, standard deviation (degrees) and
+    share beyond 1 degree (%)."""
+    return [num(v[k], 3) for k in ("median_deg", "robust_scatter_deg", "std_deg")] + [num(100 * v["share_beyond_1_deg"], 1)]
+
+
 def band_slope() -> str:
     """The bands' slope read as a pitch error and the full registration's forward motion over the
     true travel, per drive, with the pair projected at the true attitude against the road, with a
     pitch error both BEVs share and with the earlier BEV's pitch alone off."""
     d = record(BAND_SLOPE)["drives"]
     rows = [
-        [f"{name}: {condition}"]
-        + [num(v[k], 3) for k in ("median_deg", "robust_scatter_deg", "std_deg")]
-        + [num(100 * v["share_beyond_1_deg"], 1), num(v["forward_over_true_median"], 3)]
+        [f"{name}: {condition}", *_scatter_cells(v), num(v["forward_over_true_median"], 3)]
         for name, drive in d.items()
         for condition, v in sorted(drive["conditions"].items(), key=lambda item: (item[0] != "exact", item[0]))
     ]
@@ -1208,9 +1212,7 @@ def band_slope_confidence() -> str:
     """The slope's scatter at the true attitude per fifth of the pairs by DPC's confidence."""
     d = record(BAND_SLOPE)["drives"]
     rows = [
-        [f"{name}: {num(b['confidence'][0], 2)}-{num(b['confidence'][1], 2)}"]
-        + [num(b[k], 3) for k in ("median_deg", "robust_scatter_deg", "std_deg")]
-        + [num(100 * b["share_beyond_1_deg"], 1)]
+        [f"{name}: {num(b['confidence'][0], 2)}-{num(b['confidence'][1], 2)}", *_scatter_cells(b)]
         for name, drive in d.items()
         for b in drive["by_confidence"]
     ]
