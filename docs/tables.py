@@ -1220,12 +1220,12 @@ def band_slope_confidence() -> str:
     return table(header, rows)
 
 
-def _band_slope_responses(name: str, rec: dict) -> tuple[float, float]:
-    """The slope's response (degrees, against the exact pair) to the shared offset and to the
-    earlier BEV's alone, on drive ``name``."""
+def _band_slope_responses(name: str, rec: dict, metric: str = "median_deg") -> tuple[float, float]:
+    """How far ``metric`` moves (against the exact pair) for the shared offset and for the earlier
+    BEV's alone, on drive ``name``."""
     c, offset = rec["drives"][name]["conditions"], rec["settings"]["offset_deg"]
-    exact = c["exact"]["median_deg"]
-    return c[f"both +{offset} deg"]["median_deg"] - exact, c[f"earlier +{offset} deg"]["median_deg"] - exact
+    exact = c["exact"][metric]
+    return c[f"both +{offset} deg"][metric] - exact, c[f"earlier +{offset} deg"][metric] - exact
 
 
 def band_slope_tilt_change() -> str:
@@ -1257,17 +1257,13 @@ def band_slope_response() -> str:
     earlier BEV's alone (against the exact pair), the ratio of the two slope responses and the
     band model's."""
     rec = record(BAND_SLOPE)
-    offset = rec["settings"]["offset_deg"]
     parts = []
     for name, v in rec["drives"].items():
-        c = v["conditions"]
-        exact, both, earlier = (
-            c[k]["forward_over_true_median"] for k in ("exact", f"both +{offset} deg", f"earlier +{offset} deg")
-        )
         shared, alone = _band_slope_responses(name, rec)
+        both, earlier = _band_slope_responses(name, rec, "forward_over_true_median")
         parts.append(
             f"{name}: slope {shared:+.3f} against {alone:+.3f} deg ({alone / shared:.1f} times; the band model"
-            f" {v['model_ratio_median']:.1f}), forward motion {100 * (both - exact):+.1f} against {100 * (earlier - exact):+.1f} %"
+            f" {v['model_ratio_median']:.1f}), forward motion {100 * both:+.1f} against {100 * earlier:+.1f} %"
         )
     return "; ".join(parts)
 
