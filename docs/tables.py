@@ -1014,6 +1014,47 @@ def real_kitti_imu_dropouts() -> str:
     return table(header, rows)
 
 
+IMU_DROPOUTS = "benchmarks/results/imu_dropouts.json"
+
+
+def imu_dropouts_truth_bend() -> str:
+    """The truth's largest bend inside the dropouts, per drive, and its median elsewhere."""
+    drives = record(IMU_DROPOUTS)["drives"]
+    names = list(drives)
+    listed = lambda xs: ", ".join(xs[:-1]) + " and " + xs[-1] if len(xs) > 1 else xs[0]
+    inside = listed([f"{drives[n]['truth_bend_deg']['dropouts_max']:.2f}" for n in names])
+    elsewhere = listed([f"{drives[n]['truth_bend_deg']['elsewhere_median']:.2f}" for n in names])
+    return f"{inside} deg per frame on {listed(names)} (median elsewhere {elsewhere})"
+
+
+def imu_dropouts() -> str:
+    """The street preset's attitude filter on every KITTI drive whose published IMU has dropouts:
+    the published rows against the dropouts marked missing (held, widened)."""
+    d = record(IMU_DROPOUTS)
+    after = d["settings"]["after_frames"]
+    variants = ("published", "held", "widened")
+    rows = []
+    for name, drive in d["drives"].items():
+        rows.append(
+            [
+                name,
+                str(len(drive["gaps"])),
+                " / ".join(f"{drive[v]['rmse_deg']:.3f}" for v in variants),
+                " / ".join(f"{drive[v]['near_gaps_rmse_deg']:.2f}" for v in variants),
+                " / ".join(f"{drive[v]['near_gaps_max_deg']:.2f}" for v in variants),
+            ]
+        )
+    rows.append(["pooled", "", " / ".join(f"{d['pooled']['rmse_deg'][v]:.3f}" for v in variants), "", ""])
+    header = [
+        "drive",
+        "dropouts",
+        "pitch/roll RMSE (deg): published / missing, held / widened",
+        f"the same from each dropout to {after} frames past it",
+        "largest error there (deg), the same three",
+    ]
+    return table(header, rows)
+
+
 FORWARD_FUSION = "benchmarks/results/forward_fusion.json"
 FORWARD_COLUMNS = [
     ("distance_ratio", "distance ratio", 3),
@@ -1503,6 +1544,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "real_kitti_learned": real_kitti_learned,
     "real_kitti_targets": real_kitti_targets,
     "real_kitti_imu_dropouts": real_kitti_imu_dropouts,
+    "imu_dropouts": imu_dropouts,
     "street_world_signature": street_world_signature,
     "street_world_models": street_world_models,
     "street_world_zero_shot": street_world_zero_shot,
@@ -1514,6 +1556,7 @@ TABLES: dict[str, Callable[[], str]] = {
 }
 
 VALUES: dict[str, Callable[[], str]] = {
+    "imu_dropouts_truth_bend": imu_dropouts_truth_bend,
     "band_slope_tilt_change": band_slope_tilt_change,
     "street_oracle_slow_fast": street_oracle_slow_fast,
     "band_slope_phantom": band_slope_phantom,

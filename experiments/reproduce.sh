@@ -16,6 +16,7 @@ python benchmarks/bevo.py
 python benchmarks/scaling.py
 python benchmarks/attitude.py
 python benchmarks/attitude_real.py
+python benchmarks/imu_dropouts.py
 python benchmarks/real_kitti.py
 python benchmarks/street_world.py
 python benchmarks/forward_fusion.py

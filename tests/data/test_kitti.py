@@ -121,6 +121,7 @@ def test_rows_on_a_dropout_line_are_marked_missing(seq):
         assert expected.sum() > 30
         np.testing.assert_array_equal(np.isnan(gyro).any(-1), expected)
         np.testing.assert_array_equal(np.isnan(accel).any(-1), expected)
+        np.testing.assert_array_equal(kitti.on_dropout_lines(times, span, offset), expected)
         np.testing.assert_array_equal(gyro[~expected], np.asarray(seq.gyro)[~expected])
         np.testing.assert_array_equal(np.asarray(marked.images), np.asarray(seq.images))
     # Read as published (no offset), the blocks wholly on the line are those after the first knot's.
@@ -131,3 +132,5 @@ def test_rows_on_a_dropout_line_are_marked_missing(seq):
     for bad in (span[0], span[:, ::-1]):
         with pytest.raises(ValueError, match="spans must be"):
             kitti.without_dropouts(seq, bad)
+        with pytest.raises(ValueError, match="spans must be"):
+            kitti.on_dropout_lines(times, bad)

@@ -179,6 +179,20 @@ def dropout_spans(stream: ImuStream, rows_per_frame: int = 10, tolerance: float 
     return np.stack([knots[starts - 1], knots[ends]], -1) if len(starts) else np.zeros((0, 2))
 
 
+def on_dropout_lines(imu_times: np.ndarray, spans: np.ndarray, time_offset_s: float = 0.0) -> np.ndarray:
+    """Which IMU rows, stamped ``imu_times`` (any shape), lie on a dropout's straight line
+    (:func:`dropout_spans`): those whose ``t - time_offset_s`` lies strictly inside a span
+    (``time_offset_s`` as in :func:`without_dropouts`). A boolean array of ``imu_times``' shape."""
+    spans = np.asarray(spans, float)
+    if spans.ndim != 2 or spans.shape[1] != 2 or not np.all(spans[:, 1] > spans[:, 0]):
+        raise ValueError(f"spans must be (start, end) pairs with end > start, shape (G, 2); got {spans.tolist()}")
+    t = np.asarray(imu_times, float) - time_offset_s
+    on_line = np.zeros(t.shape, bool)
+    for start, end in spans:
+        on_line |= (t > start) & (t < end)
+    return on_line
+
+
 def without_dropouts(seq: Sequence, spans: np.ndarray, time_offset_s: float = 0.0) -> Sequence:
     """``seq`` with the IMU rows that lie on a dropout's straight line (:func:`dropout_spans`)
     marked missing (NaN), so that a filter treats them as unmeasured instead of as a measured
@@ -189,14 +203,7 @@ def without_dropouts(seq: Sequence, spans: np.ndarray, time_offset_s: float = 0.
     (:attr:`jbevo.inertial.calibration.ImuCalibration.time_offset_s`; zero for a sequence read as
     published), so that the rows of a calibrated, resampled sequence are marked where they took
     their values from the line."""
-    spans = np.asarray(spans, float)
-    if spans.ndim != 2 or spans.shape[1] != 2 or not np.all(spans[:, 1] > spans[:, 0]):
-        raise ValueError(f"spans must be (start, end) pairs with end > start, shape (G, 2); got {spans.tolist()}")
-    t = np.asarray(seq.imu_times, float) - time_offset_s
-    on_line = np.zeros(t.shape, bool)
-    for start, end in spans:
-        on_line |= (t > start) & (t < end)
-    mask = jnp.asarray(on_line)[..., None]
+    mask = jnp.asarray(on_dropout_lines(np.asarray(seq.imu_times), spans, time_offset_s))[..., None]
     marked = (jnp.where(mask, jnp.nan, seq.gyro), jnp.where(mask, jnp.nan, seq.accel))
     return check(eqx.tree_at(lambda q: (q.gyro, q.accel), seq, marked))
 
@@ -485,6 +492,7 @@ __all__ = [
     "has_imu",
     "imu_to_rectified_camera",
     "interpolated_frames",
+    "on_dropout_lines",
     "oxts_poses",
     "read_kitti_imu",
     "read_odometry",
