@@ -22,6 +22,7 @@ python benchmarks/street_world.py
 python benchmarks/forward_fusion.py
 python benchmarks/street_drives.py
 python benchmarks/street_oracle.py
+python benchmarks/band_slope.py
 python experiments/filtering_demo.py
 python experiments/reference_metrics.py
 python experiments/bands.py
