@@ -1455,6 +1455,8 @@ def street_world_zero_shot() -> str:
         ["street + robust bands, hand-set"] + [_metric(real[k]["street + robust bands"], "final_pct", 2) for k in keys],
         [f"street + robust bands, learned in the street world only ({seeds} seeds)"]
         + [_metric(d["zero_shot"][k], "final_pct", 2) for k in keys],
+        [f"the same, the camera's calibration frozen ({seeds} seeds)"]
+        + [_metric(d["zero_shot_calibration_frozen"][k], "final_pct", 2) for k in keys],
     ]
     for name in ("street + robust bands, learned",):
         rows.append(
@@ -1488,6 +1490,10 @@ def street_world_zero_shot_parameters() -> str:
 
 def street_world_zero_shot_steps() -> str:
     return ", ".join(str(c["step"]) for c in record(STREET_WORLD)["zero_shot_checkpoints"])
+
+
+def street_world_zero_shot_frozen_steps() -> str:
+    return ", ".join(str(c["step"]) for c in record(STREET_WORLD)["zero_shot_calibration_frozen_checkpoints"])
 
 
 TABLES: dict[str, Callable[[], str]] = {
@@ -1580,6 +1586,7 @@ VALUES: dict[str, Callable[[], str]] = {
     "localization_wins": localization_wins,
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
     "street_world_zero_shot_steps": street_world_zero_shot_steps,
+    "street_world_zero_shot_frozen_steps": street_world_zero_shot_frozen_steps,
     "real_kitti_keyframes_speed": real_kitti_keyframes_speed,
     "kitti_street_scale": kitti_street_scale,
     "street_oracle_uncoupled": street_oracle_uncoupled,
