@@ -12,7 +12,10 @@ zero); forward fusion without its bias state, and with the update it had before 
 (:class:`RobustRelativeFusion`: DPC's noise 5 % of the increment, robust); and a sweep of the
 fusion's accelerometer noise (``accel_std``), which was looked at on these runs before the
 hand-set value was written down: it says how much the rows depend on that choice, not which
-value is best. The warm rows but the sweep also run on the street world's copies of the runs
+value is best; and the same model without the accelerometer (:class:`ConstantSpeedPrior`: DPC's
+increments under a constant-speed prior alone, for each speed walk of ``SPEED_WALKS``), which says
+what of the fusion's gain is the accelerometer's and what is smoothing. The warm rows but the
+sweep and the prior also run on the street world's copies of the runs
 (``benchmarks/street_world.py``'s street world: the real IMU, truth and frame times, rendered
 images).
 
@@ -91,6 +94,11 @@ KITTI_GRID = BevGrid(0.1, (256, 256), near=4.0)
 SWEEP = (0.02, 0.05, 0.2, 0.5, 1.58)
 
 
+#: The constant-speed prior's speed walks (m/s^2 per sample): the sweep's largest value (the
+#: attitude filter's own speed walk), a third of it, and two larger ones.
+SPEED_WALKS = (0.5, 1.58, 3.0, 5.0)
+
+
 def along_across(increments: np.ndarray, seq, start: int, stop: int) -> dict:
     """RMS of the per-frame motion error along the heading (body x) and across it, cm."""
     err = np.asarray(increments, float)[start + 1 : stop] - np.asarray(relative_motion(seq), float)[start + 1 : stop]
@@ -120,6 +128,23 @@ class RobustRelativeFusion(ForwardFusion):
         return cls(f.log_accel_std, f.log_displacement_std, f.log_bias_walk, f.bias_std)
 
 
+class ConstantSpeedPrior(ForwardFusion):
+    """:class:`ForwardFusion` without the accelerometer: every sample's forward acceleration is
+    taken as zero, the speed walking by ``accel_std`` per sample (a car's unknown acceleration),
+    so DPC's increments are smoothed under a constant-speed prior alone. Built without the bias
+    state (:meth:`create_prior`)."""
+
+    def predict(self, state: ukf.GaussianState, accel, pitch, dt: float) -> ukf.GaussianState:
+        zero = jnp.zeros_like(accel)
+        return super().predict(state, zero, jnp.zeros((), state.mean.dtype), dt)
+
+    @classmethod
+    def create_prior(cls, speed_walk: float) -> ConstantSpeedPrior:
+        """The prior with ``speed_walk`` m/s^2 per sample, DPC's hand-set noise, no bias state."""
+        f = ForwardFusion.create(accel_std=speed_walk, bias_walk=1e-9, bias_std=0.0)
+        return cls(f.log_accel_std, f.log_displacement_std, f.log_bias_walk, f.bias_std)
+
+
 def without_bias(model):
     """``model``'s forward fusion without its bias state (no prior, a negligible walk)."""
     return dataclasses.replace(
@@ -146,6 +171,9 @@ def rows(imu_dt: float, grid: BevGrid | None = None) -> dict[str, tuple]:
     for accel_std in SWEEP:
         model = dataclasses.replace(fused, forward=ForwardFusion.create(accel_std=accel_std))
         out[f"forward fusion, accel_std {accel_std} (sweep)"] = (model, True)
+    for walk in SPEED_WALKS:
+        model = dataclasses.replace(fused, forward=ConstantSpeedPrior.create_prior(walk))
+        out[f"constant-speed prior without the accelerometer, speed walk {walk}"] = (model, True)
     return out
 
 
@@ -237,6 +265,7 @@ def main() -> None:
         "displacement_std": float(jnp.exp(ForwardFusion.create().log_displacement_std)),
         "bias_walk": BIAS_WALK,
         "sweep": list(SWEEP),
+        "speed_walks": list(SPEED_WALKS),
         "bias_walk_sweep": list(BIAS_WALK_SWEEP),
         "town": args.town,
     }

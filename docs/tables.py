@@ -1095,6 +1095,24 @@ def forward_fusion_sweep() -> str:
     return table(header, rows)
 
 
+def forward_fusion_prior() -> str:
+    """The preset, forward fusion, and DPC's increments under a constant-speed prior without the
+    accelerometer, per speed walk: per-frame motion and final error on the runs and second halves."""
+    d = record(FORWARD_FUSION)
+    prior = "constant-speed prior without the accelerometer, speed walk "
+    labels = {
+        "street + robust bands": "street + robust bands",
+        "street + robust bands, forward fusion": "forward fusion (accelerometer)",
+    } | {f"{prior}{w}": f"constant-speed prior, no accelerometer, walk {w:g}" for w in d["settings"]["speed_walks"]}
+    keys = ("06", "06 second half", "07", "07 second half")
+    rows = [
+        [shown] + [f"{d['runs'][k][name]['motion_cm']:.1f} / {d['runs'][k][name]['final_pct']:.2f}" for k in keys]
+        for name, shown in labels.items()
+    ]
+    header = ["model (walk: m/s^2 per sample)"] + [f"{k}: motion (cm) / final (%)" for k in keys]
+    return table(header, rows)
+
+
 def forward_fusion_street_world() -> str:
     return _forward_rows("street_world", "street world's copy: model")
 
@@ -1504,6 +1522,7 @@ TABLES: dict[str, Callable[[], str]] = {
     "ukf_one_kernel": ukf_one_kernel,
     "forward_fusion": forward_fusion,
     "forward_fusion_sweep": forward_fusion_sweep,
+    "forward_fusion_prior": forward_fusion_prior,
     "forward_fusion_street_world": forward_fusion_street_world,
     "forward_fusion_long": forward_fusion_long,
     "forward_fusion_held_out": forward_fusion_held_out,
