@@ -11,8 +11,9 @@ N(0, ``--speed-noise``) per frame stands in for the odometry's speed, and it sta
 attitude at frame 0. Variants:
 
 * ``published``: the rows as published (the preset's widening never engages: no block is missing);
-* ``held``: the rows on a dropout's line NaN (:func:`jbevo.data.kitti.on_dropout_lines` at the
-  calibration's time offset), the filter holding its attitude through them, not widened
+* ``held``: the rows on a dropout's line NaN (read with ``imu_dropouts="missing"``:
+  :func:`jbevo.inertial.kitti_imu.calibrated_drive`), the filter holding its attitude through
+  them, not widened
   (``gap_rate_std`` 0);
 * ``widened``: the same, with the preset's ``gap_rate_std``
   (:data:`jbevo.models.presets.STREET_GAP_RATE_STD`).
@@ -100,7 +101,8 @@ def main() -> None:
             continue
         calibration = day_calibration(str(poses), str(imu), recording_day(name))
         drive = calibrated_drive(poses, imu, name, calibration=calibration)
-        on_line = kitti.on_dropout_lines(drive.imu_times, kitti.dropout_spans(published), calibration.time_offset_s)[..., None]
+        marked = calibrated_drive(poses, imu, name, calibration=calibration, imu_dropouts="missing")
+        on_line = np.isnan(marked.gyro).any(-1) & np.isfinite(drive.gyro).all(-1)
         truth = euler_zyx(drive.body_poses[:, :3, :3])[:, 1:3]
         velocity = planar_velocity(drive.body_poses, FRAME_STEP_S, args.speed_noise, 100 + int(name))
         gaps = gap_frames(flags)
@@ -115,10 +117,8 @@ def main() -> None:
             "truth_bend_deg": {"dropouts_max": float(bend[inside].max()), "elsewhere_median": float(np.median(bend[~inside]))},
         }
         for variant in VARIANTS:
-            marked = variant != "published"
-            gyro = np.where(on_line, np.nan, drive.gyro) if marked else drive.gyro
-            accel = np.where(on_line, np.nan, drive.accel) if marked else drive.accel
-            data = {k: jnp.asarray(v) for k, v in drive_data(truth, gyro, accel, velocity).items()}
+            read = drive if variant == "published" else marked
+            data = {k: jnp.asarray(v) for k, v in drive_data(truth, read.gyro, read.accel, velocity).items()}
             error = np.degrees(np.abs(np.asarray(run(filters[variant], data)) - truth[1:]))
             out[variant] = scores(error, gaps)
             squared[variant].append(error**2)

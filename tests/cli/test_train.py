@@ -184,3 +184,22 @@ def test_kitti_without_imu_is_refused_not_filtered_on_zeros(tmp_path, capsys):
     missing = argv + ["--kitti-imu", str(tmp_path / "imu")]
     assert evaluate.main(missing) == 1
     assert "missing IMU file" in capsys.readouterr().err
+
+
+def test_the_imu_dropouts_option_reaches_the_readers(monkeypatch, capsys):
+    assert train.build_parser().parse_args([]).imu_dropouts == "published"
+    assert evaluate.build_parser().parse_args(["--imu-dropouts", "missing"]).imu_dropouts == "missing"
+    with pytest.raises(SystemExit):
+        train.build_parser().parse_args(["--imu-dropouts", "dropped"])
+    assert "invalid choice" in capsys.readouterr().err
+    asked = []
+
+    def load(dataset, names, **options):
+        asked.append(options["imu_dropouts"])
+        raise FileNotFoundError("stop here")
+
+    monkeypatch.setattr(train, "load_sequences", load)
+    args = train.build_parser().parse_args(["--dataset", "kitti", "--kitti-root", "x", "--imu-dropouts", "missing"])
+    with pytest.raises(train.common.CommandError):
+        train.load_datasets(args)
+    assert asked == ["missing"]

@@ -110,6 +110,29 @@ def test_frames_interpolated_over_a_dropout_are_found():
         kitti.interpolated_frames(stream, 0)
 
 
+def test_a_reader_marks_a_dropout_missing_when_asked(seq, tmp_path):
+    import scipy.io
+
+    kitti.write_odometry(seq, tmp_path, "03")
+    rng = np.random.default_rng(1)
+    per, n = 10, seq.num_frames
+    rows = np.cumsum(rng.normal(0.0, 0.03, (per * (n - 1) + 1, 6)), axis=0) + [0.0, 0.0, 9.8, 0.0, 0.0, 0.0]
+    a, b = 3 * per, 7 * per  # a line from frame 3's sample to frame 7's
+    rows[a : b + 1] = rows[a] + np.linspace(0.0, 1.0, b - a + 1)[:, None] * (rows[b] - rows[a])
+    scipy.io.savemat(tmp_path / "03.mat", {"imu_data_interp": rows})
+    published = kitti.read_odometry(tmp_path, "03", imu=tmp_path)
+    missing = kitti.read_odometry(tmp_path, "03", imu=tmp_path, imu_dropouts="missing")
+    t = np.asarray(published.frame_times, float)
+    spans = kitti.dropout_spans(kitti.read_kitti_imu(tmp_path / "03.mat", t))
+    np.testing.assert_allclose(spans, [[t[3], t[7]]])
+    np.testing.assert_array_equal(np.asarray(missing.gyro), np.asarray(kitti.without_dropouts(published, spans).gyro))
+    # Blocks 5-7 lie wholly on the line (block k: the rows from frame k - 1 to frame k).
+    wholly = np.isnan(np.asarray(missing.gyro)).all((1, 2))
+    np.testing.assert_array_equal(np.flatnonzero(wholly), [0, 5, 6, 7])
+    with pytest.raises(ValueError, match="imu_dropouts must be one of"):
+        kitti.read_odometry(tmp_path, "03", imu=tmp_path, imu_dropouts="skip")
+
+
 def test_rows_on_a_dropout_line_are_marked_missing(seq):
     # A line from frame 2 to frame 6: the rows strictly between go, the knots' stay.
     frame_t, times = np.asarray(seq.frame_times, float), np.asarray(seq.imu_times, float)

@@ -156,3 +156,30 @@ def test_the_rows_of_06s_dropout_are_marked_missing(reference_data):
     marked = np.isnan(np.asarray(kitti.without_dropouts(raw, spans).gyro))
     np.testing.assert_array_equal(np.flatnonzero(marked.all((1, 2))), np.r_[0, 2:13])
     assert marked[1].any(-1).sum() == 9
+
+
+def test_the_readers_mark_the_dropouts_when_asked(reference_data):
+    # read_run(imu_dropouts="missing") is without_dropouts over the published IMU's spans; the
+    # calibrated drive marks the same rows as without_dropouts at the calibration's time offset.
+    from jbevo.inertial import calibration as cal
+    from jbevo.inertial import kitti_imu
+
+    poses, imu = reference_data / "kitti_odom" / "gt_poses", reference_data / "kitti_odom" / "imu"
+    run = reference_data / "realdata" / "kitti_odometry_06_first51"
+    raw = kitti.read_run(run, imu=imu / "06.mat")
+    spans = kitti.dropout_spans(kitti.read_kitti_imu(imu / "06.mat", np.asarray(raw.frame_times)))
+    missing = kitti.read_run(run, imu=imu / "06.mat", imu_dropouts="missing")
+    expected = kitti.without_dropouts(raw, spans)
+    np.testing.assert_array_equal(np.asarray(missing.gyro), np.asarray(expected.gyro))
+    np.testing.assert_array_equal(np.asarray(missing.accel), np.asarray(expected.accel))
+    calibration = cal.calibrate([kitti_imu.calibration_drive(poses, imu, n) for n in ("04", "05", "08")])
+    drive = kitti_imu.calibrated_drive(poses, imu, "06", calibration=calibration)
+    marked_drive = kitti_imu.calibrated_drive(poses, imu, "06", calibration=calibration, imu_dropouts="missing")
+    published = kitti.read_kitti_imu(imu / "06.mat", drive.frame_times)
+    marked = kitti.without_dropouts(
+        kitti_imu.calibrated_sequence(raw, drive), kitti.dropout_spans(published), calibration.time_offset_s
+    )
+    np.testing.assert_array_equal(np.asarray(kitti_imu.calibrated_sequence(raw, marked_drive).gyro), np.asarray(marked.gyro))
+    assert np.isnan(marked_drive.gyro[2:12]).all() and np.isfinite(marked_drive.gyro[14:100]).all()
+    with pytest.raises(ValueError, match="imu_dropouts must be one of"):
+        kitti.read_run(run, imu=imu / "06.mat", imu_dropouts="dropped")

@@ -20,6 +20,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 from jbevo.data.catalog import DATASETS
+from jbevo.data.kitti import IMU_DROPOUTS
 from jbevo.data.synthetic.street import WORLDS
 from jbevo.data.synthetic.world import TOWNS
 from jbevo.geometry.bev_grid import BevGrid
@@ -191,6 +192,12 @@ def dataset_options(default_frames: int) -> argparse.ArgumentParser:
         "--kitti-imu",
         type=Path,
         help="folder of the KITTI odometry IMU files NN.mat (kitti, kitti-synthetic): the real IMU the attitude filter runs on",
+    )
+    p.add_argument(
+        "--imu-dropouts",
+        choices=IMU_DROPOUTS,
+        default="published",
+        help="the real IMU's dropouts: as the files fill them (straight lines) or marked missing",
     )
     p.add_argument(
         "--frames",

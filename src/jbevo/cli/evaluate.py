@@ -114,6 +114,7 @@ def evaluate(args: argparse.Namespace) -> int:
                 args.town,
                 seed=args.seed,
                 kitti_imu=args.kitti_imu,
+                imu_dropouts=args.imu_dropouts,
                 positions=mine,
                 world=args.world,
             )

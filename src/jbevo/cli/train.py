@@ -70,6 +70,7 @@ def load_datasets(args: argparse.Namespace) -> tuple[list[Sequence], list[Sequen
         kitti_poses=args.kitti_poses,
         kitti_root=args.kitti_root,
         kitti_imu=args.kitti_imu,
+        imu_dropouts=args.imu_dropouts,
         camera=args.camera,
         town=args.town,
         world=args.world,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from jbevo.data.kitti import check_imu_dropouts
 from jbevo.data.sequence import Sequence
 from jbevo.data.synthetic.sequences import builtin_dataset, kitti_sequence, small_camera
 from jbevo.data.synthetic.street import Street, street_named
@@ -28,6 +29,7 @@ def load_sequences(
     kitti_imu: Path | None = None,
     positions: list[int] | None = None,
     world: str | Street | None = "flat",
+    imu_dropouts: str = "published",
 ) -> list[Sequence]:
     """The sequences ``names`` of ``dataset``. For ``synthetic``, ``names`` are seeds (one
     procedural drive each, ``frames`` frames); for ``kitti-synthetic`` KITTI sequence names whose
@@ -38,8 +40,10 @@ def load_sequences(
     rendered with seed ``seed + i``, or ``seed + positions[i]`` where ``names`` is a share of a
     longer list); for ``kitti`` sequence names under ``kitti_root``. ``world`` is the synthetic
     world's kind (``flat`` or ``street``: :mod:`jbevo.data.synthetic.street`) or its
-    :class:`~jbevo.data.synthetic.street.Street` settings (``None``: flat). ``ValueError`` names
-    what is missing."""
+    :class:`~jbevo.data.synthetic.street.Street` settings (``None``: flat). ``imu_dropouts``: how
+    the real IMU's dropouts are read (``published`` or ``missing``:
+    :func:`jbevo.data.kitti.read_odometry`). ``ValueError`` names what is missing."""
+    check_imu_dropouts(imu_dropouts)
     street = street_named(world) if isinstance(world, str) else world
     if dataset == "synthetic":
         return [builtin_dataset(frames, 1, town, int(n), street)[0] for n in progress(names, "rendering synthetic drives")]
@@ -61,7 +65,7 @@ def load_sequences(
                 raise ValueError(f"no KITTI pose file {path}")
             poses = read_kitti(path).poses
             n = min(frames, len(poses) - 1) if frames else None
-            real = None if kitti_imu is None else calibrated_drive(kitti_poses, kitti_imu, name)
+            real = None if kitti_imu is None else calibrated_drive(kitti_poses, kitti_imu, name, imu_dropouts=imu_dropouts)
             out.append(kitti_sequence(poses, 0, n, camera=cam, world=ground, seed=seed + i, real_imu=real, street=street))
         return out
     if dataset == "kitti":
@@ -69,7 +73,10 @@ def load_sequences(
             raise ValueError("the kitti dataset needs kitti_root, a KITTI odometry folder")
         from jbevo.data.kitti import read_odometry
 
-        return [read_odometry(kitti_root, n, imu=kitti_imu) for n in progress(names, "reading KITTI sequences")]
+        return [
+            read_odometry(kitti_root, n, imu=kitti_imu, imu_dropouts=imu_dropouts)
+            for n in progress(names, "reading KITTI sequences")
+        ]
     raise ValueError(f"unknown dataset {dataset!r}; known: {DATASETS}")
 
 

@@ -214,11 +214,16 @@ def _imu_file(imu: str | Path, sequence: str) -> Path:
 
 
 def read_odometry(
-    root: str | Path, sequence: str, camera_height: float = CAMERA_HEIGHT, imu: str | Path | None = None
+    root: str | Path,
+    sequence: str,
+    camera_height: float = CAMERA_HEIGHT,
+    imu: str | Path | None = None,
+    imu_dropouts: str = "published",
 ) -> Sequence:
     """Sequence ``sequence`` (e.g. ``"09"``) of a KITTI odometry folder. ``imu``: the sequence's
     KITTI odometry IMU file, or the folder holding ``NN.mat`` (:func:`read_kitti_imu`); without it
-    the IMU arrays are NaN."""
+    the IMU arrays are NaN. ``imu_dropouts``: ``published`` keeps the rows the file fills its
+    dropouts with, ``missing`` marks them NaN (:func:`without_dropouts`)."""
     root = Path(root)
     folder = root / "sequences" / sequence
     if not folder.is_dir():
@@ -231,7 +236,7 @@ def read_odometry(
         raise ValueError(f"{folder}: {n} images but {len(times)} times")
     pose_file = root / "poses" / f"{sequence}.txt"
     poses = _body_poses(pose_file, n) if pose_file.is_file() else np.full((n, 4, 4), np.nan)
-    blocks = _imu_blocks(None if imu is None else _imu_file(imu, sequence), times)
+    blocks = _imu_blocks(None if imu is None else _imu_file(imu, sequence), times, imu_dropouts)
     return _sequence(images, times, *blocks, _camera(p0, images.shape[1:], camera_height), poses)
 
 
@@ -253,21 +258,44 @@ def _body_poses(pose_file: Path, n: int) -> np.ndarray:
     return body_poses_from_kitti(cam)
 
 
-def _imu_blocks(imu_file: Path | str | None, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The frame blocks of a KITTI odometry IMU file, or NaN blocks of one sample without it."""
+#: How the readers take the published IMU's dropouts (:func:`interpolated_frames`): as published
+#: (the straight lines), or ``missing`` (the rows on the lines NaN, :func:`on_dropout_lines`).
+IMU_DROPOUTS = ("published", "missing")
+
+
+def check_imu_dropouts(imu_dropouts: str) -> None:
+    """``ValueError`` unless ``imu_dropouts`` is one of :data:`IMU_DROPOUTS`."""
+    if imu_dropouts not in IMU_DROPOUTS:
+        raise ValueError(f"imu_dropouts must be one of {', '.join(IMU_DROPOUTS)}; got {imu_dropouts!r}")
+
+
+def _imu_blocks(
+    imu_file: Path | str | None, times: np.ndarray, imu_dropouts: str = "published"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The frame blocks of a KITTI odometry IMU file (with ``imu_dropouts`` ``missing``, the rows on
+    a dropout's line NaN), or NaN blocks of one sample without it."""
+    check_imu_dropouts(imu_dropouts)
     if imu_file is None:
         nan = np.full((len(times), 1, 3), np.nan)
         return times[:, None], nan, nan
-    return group_blocks(read_kitti_imu(imu_file, times), times)
+    stream = read_kitti_imu(imu_file, times)
+    block_times, gyro, accel = group_blocks(stream, times)
+    if imu_dropouts == "missing":
+        on_line = on_dropout_lines(block_times, dropout_spans(stream))[..., None]
+        gyro, accel = np.where(on_line, np.nan, gyro), np.where(on_line, np.nan, accel)
+    return block_times, gyro, accel
 
 
-def read_run(folder: str | Path, imu: str | Path | None = None, camera_height: float = CAMERA_HEIGHT) -> Sequence:
+def read_run(
+    folder: str | Path, imu: str | Path | None = None, camera_height: float = CAMERA_HEIGHT, imu_dropouts: str = "published"
+) -> Sequence:
     """One KITTI odometry run kept in a single folder: ``image_0/*.png``, ``times.txt``,
     ``calib.txt`` (with ``P0``) and ``poses.txt`` (the ground truth of these frames), as the first
     frames of a sequence are often shipped. ``times.txt`` may be the whole sequence's (longer than
     the images: its first lines are these frames'); ``poses.txt`` must have one line per image.
     ``imu``: the sequence's KITTI odometry IMU file ``NN.mat`` (:func:`read_kitti_imu`; cut to
-    these frames); without it the IMU arrays are NaN."""
+    these frames); without it the IMU arrays are NaN. ``imu_dropouts`` as in
+    :func:`read_odometry`."""
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f"missing run folder {folder}")
@@ -279,7 +307,7 @@ def read_run(folder: str | Path, imu: str | Path | None = None, camera_height: f
     times = times[:n]
     poses = _body_poses(folder / "poses.txt", n)
     camera = _camera(_p0(folder / "calib.txt"), images.shape[1:], camera_height)
-    return _sequence(images, times, *_imu_blocks(imu, times), camera, poses)
+    return _sequence(images, times, *_imu_blocks(imu, times, imu_dropouts), camera, poses)
 
 
 def has_imu(seq: Sequence) -> bool:
@@ -486,7 +514,9 @@ def write_raw(seq: Sequence, drive_folder: str | Path, lat0: float = 49.0, lon0:
 
 __all__ = [
     "EARTH_RADIUS",
+    "IMU_DROPOUTS",
     "INTERPOLATION_TOLERANCE",
+    "check_imu_dropouts",
     "dropout_spans",
     "frame_curvature",
     "has_imu",
