@@ -95,7 +95,7 @@ SWEEP = (0.02, 0.05, 0.2, 0.5, 1.58)
 
 
 #: The constant-speed prior's speed walks (m/s^2 per sample): the sweep's largest value (the
-#: attitude filter's own speed walk), a third of it, and two larger ones.
+#: attitude filter's own speed walk), about a third of it, and two larger ones.
 SPEED_WALKS = (0.5, 1.58, 3.0, 5.0)
 
 

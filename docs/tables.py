@@ -1066,13 +1066,18 @@ FORWARD_COLUMNS = [
 ]
 
 
+#: The forward-fusion record's rows of the constant-speed prior start with this, the walk follows.
+SPEED_PRIOR = "constant-speed prior without the accelerometer, speed walk "
+
+
 def _forward_rows(kind: str, first: str) -> str:
-    """The forward-fusion record's ``kind`` table (``runs`` or ``street_world``), sweep rows left out."""
+    """The forward-fusion record's ``kind`` table (``runs`` or ``street_world``), the rows of the
+    accelerometer noise's sweep and of the constant-speed prior left out (tables of their own)."""
     rows = [
         [f"{segment}: {name}"] + [num(m[key], digits) for key, _, digits in FORWARD_COLUMNS]
         for segment, values in record(FORWARD_FUSION)[kind].items()
         for name, m in values.items()
-        if "(sweep)" not in name
+        if "(sweep)" not in name and not name.startswith(SPEED_PRIOR)
     ]
     return table([first] + [c[1] for c in FORWARD_COLUMNS], rows)
 
@@ -1099,11 +1104,10 @@ def forward_fusion_prior() -> str:
     """The preset, forward fusion, and DPC's increments under a constant-speed prior without the
     accelerometer, per speed walk: per-frame motion and final error on the runs and second halves."""
     d = record(FORWARD_FUSION)
-    prior = "constant-speed prior without the accelerometer, speed walk "
     labels = {
         "street + robust bands": "street + robust bands",
         "street + robust bands, forward fusion": "forward fusion (accelerometer)",
-    } | {f"{prior}{w}": f"constant-speed prior, no accelerometer, walk {w:g}" for w in d["settings"]["speed_walks"]}
+    } | {f"{SPEED_PRIOR}{w}": f"constant-speed prior, no accelerometer, walk {w:g}" for w in d["settings"]["speed_walks"]}
     keys = ("06", "06 second half", "07", "07 second half")
     rows = [
         [shown] + [f"{d['runs'][k][name]['motion_cm']:.1f} / {d['runs'][k][name]['final_pct']:.2f}" for k in keys]
@@ -1510,6 +1514,15 @@ def street_world_zero_shot_steps() -> str:
     return ", ".join(str(c["step"]) for c in record(STREET_WORLD)["zero_shot_checkpoints"])
 
 
+def street_world_zero_shot_frozen_gap() -> str:
+    """The largest difference, in percentage points, between the frozen-calibration fit's final
+    errors (means over the seeds) and the hand-set preset's on the zero-shot table's runs."""
+    d = record(STREET_WORLD)["zero_shot_calibration_frozen"]
+    real = record(REAL_KITTI)["runs"]
+    keys = ["06", "06 second half", "07", "07 second half"]
+    return f"{max(abs(d[k]['final_pct'] - real[k]['street + robust bands']['final_pct']) for k in keys):.3f}"
+
+
 def street_world_zero_shot_frozen_steps() -> str:
     return ", ".join(str(c["step"]) for c in record(STREET_WORLD)["zero_shot_calibration_frozen_checkpoints"])
 
@@ -1606,6 +1619,7 @@ VALUES: dict[str, Callable[[], str]] = {
     "street_world_zero_shot_parameters": street_world_zero_shot_parameters,
     "street_world_zero_shot_steps": street_world_zero_shot_steps,
     "street_world_zero_shot_frozen_steps": street_world_zero_shot_frozen_steps,
+    "street_world_zero_shot_frozen_gap": street_world_zero_shot_frozen_gap,
     "real_kitti_keyframes_speed": real_kitti_keyframes_speed,
     "kitti_street_scale": kitti_street_scale,
     "street_oracle_uncoupled": street_oracle_uncoupled,

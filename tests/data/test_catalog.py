@@ -36,3 +36,10 @@ def test_a_world_is_named_or_given_by_its_settings(reference_data):
     np.testing.assert_array_equal(
         np.asarray(flat.images), np.asarray(load_sequences("kitti-synthetic", ["04"], 4, poses)[0].images)
     )
+
+
+def test_marking_imu_dropouts_needs_the_real_imu():
+    with pytest.raises(ValueError, match="needs kitti_imu"):
+        load_sequences("synthetic", ["0"], frames=2, imu_dropouts="missing")
+    with pytest.raises(ValueError, match="imu_dropouts must be one of"):
+        load_sequences("synthetic", ["0"], frames=2, imu_dropouts="dropped")

@@ -157,3 +157,13 @@ def test_rows_on_a_dropout_line_are_marked_missing(seq):
             kitti.without_dropouts(seq, bad)
         with pytest.raises(ValueError, match="spans must be"):
             kitti.on_dropout_lines(times, bad)
+
+
+def test_a_knot_stamped_in_float32_stays_a_knot():
+    # Late in a long drive a float32 stamp of a knot lies up to ~30 microseconds off the float64
+    # knot, inside the span: it is still the recorded sample, not the line.
+    knots = np.array([[1234.5671, 1235.8123]])
+    stamps = np.float32(knots[0, 0] + 0.01 * np.arange(0, 126))
+    assert float(stamps[0]) > knots[0, 0]  # rounded into the span
+    marked = kitti.on_dropout_lines(stamps, knots)
+    assert not marked[0] and marked[1:125].all() and not marked[125]

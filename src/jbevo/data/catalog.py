@@ -44,6 +44,8 @@ def load_sequences(
     the real IMU's dropouts are read (``published`` or ``missing``:
     :func:`jbevo.data.kitti.read_odometry`). ``ValueError`` names what is missing."""
     check_imu_dropouts(imu_dropouts)
+    if imu_dropouts != "published" and kitti_imu is None:
+        raise ValueError(f"imu_dropouts={imu_dropouts!r} needs kitti_imu, the real IMU whose dropouts it marks")
     street = street_named(world) if isinstance(world, str) else world
     if dataset == "synthetic":
         return [builtin_dataset(frames, 1, town, int(n), street)[0] for n in progress(names, "rendering synthetic drives")]

@@ -179,17 +179,24 @@ def dropout_spans(stream: ImuStream, rows_per_frame: int = 10, tolerance: float 
     return np.stack([knots[starts - 1], knots[ends]], -1) if len(starts) else np.zeros((0, 2))
 
 
+#: Seconds within which a row's stamp counts as a dropout line's knot (a recorded sample), not
+#: as inside the line: a sequence's float32 stamps of a long drive are that far off the float64
+#: knots (IMU rows are 10 ms apart).
+KNOT_TOLERANCE_S = 1e-4
+
+
 def on_dropout_lines(imu_times: np.ndarray, spans: np.ndarray, time_offset_s: float = 0.0) -> np.ndarray:
     """Which IMU rows, stamped ``imu_times`` (any shape), lie on a dropout's straight line
-    (:func:`dropout_spans`): those whose ``t - time_offset_s`` lies strictly inside a span
-    (``time_offset_s`` as in :func:`without_dropouts`). A boolean array of ``imu_times``' shape."""
+    (:func:`dropout_spans`): those whose ``t - time_offset_s`` lies inside a span by more than
+    :data:`KNOT_TOLERANCE_S` (``time_offset_s`` as in :func:`without_dropouts`). A boolean array of
+    ``imu_times``' shape."""
     spans = np.asarray(spans, float)
     if spans.ndim != 2 or spans.shape[1] != 2 or not np.all(spans[:, 1] > spans[:, 0]):
         raise ValueError(f"spans must be (start, end) pairs with end > start, shape (G, 2); got {spans.tolist()}")
     t = np.asarray(imu_times, float) - time_offset_s
     on_line = np.zeros(t.shape, bool)
     for start, end in spans:
-        on_line |= (t > start) & (t < end)
+        on_line |= (t > start + KNOT_TOLERANCE_S) & (t < end - KNOT_TOLERANCE_S)
     return on_line
 
 
@@ -198,11 +205,11 @@ def without_dropouts(seq: Sequence, spans: np.ndarray, time_offset_s: float = 0.
     marked missing (NaN), so that a filter treats them as unmeasured instead of as a measured
     straight line (:attr:`jbevo.inertial.speed_aided.SpeedAidedAttitude.gap_rate_std`).
 
-    A row stamped ``t`` in ``seq.imu_times`` is on a line if ``t - time_offset_s`` lies strictly
-    inside one of ``spans``: ``time_offset_s`` is what a calibration added to the stream's stamps
-    (:attr:`jbevo.inertial.calibration.ImuCalibration.time_offset_s`; zero for a sequence read as
-    published), so that the rows of a calibrated, resampled sequence are marked where they took
-    their values from the line."""
+    A row stamped ``t`` in ``seq.imu_times`` is on a line if ``t - time_offset_s`` lies inside one
+    of ``spans`` (:func:`on_dropout_lines`): ``time_offset_s`` is what a calibration added to the
+    stream's stamps (:attr:`jbevo.inertial.calibration.ImuCalibration.time_offset_s`; zero for a
+    sequence read as published), so that the rows of a calibrated, resampled sequence are marked
+    where they took their values from the line."""
     mask = jnp.asarray(on_dropout_lines(np.asarray(seq.imu_times), spans, time_offset_s))[..., None]
     marked = (jnp.where(mask, jnp.nan, seq.gyro), jnp.where(mask, jnp.nan, seq.accel))
     return check(eqx.tree_at(lambda q: (q.gyro, q.accel), seq, marked))
@@ -516,6 +523,7 @@ __all__ = [
     "EARTH_RADIUS",
     "IMU_DROPOUTS",
     "INTERPOLATION_TOLERANCE",
+    "KNOT_TOLERANCE_S",
     "check_imu_dropouts",
     "dropout_spans",
     "frame_curvature",
