@@ -13,8 +13,7 @@ attitude at frame 0. Variants:
 * ``published``: the rows as published (the preset's widening never engages: no block is missing);
 * ``held``: the rows on a dropout's line NaN (read with ``imu_dropouts="missing"``:
   :func:`jbevo.inertial.kitti_imu.calibrated_drive`), the filter holding its attitude through
-  them, not widened
-  (``gap_rate_std`` 0);
+  them, not widened (``gap_rate_std`` 0);
 * ``widened``: the same, with the preset's ``gap_rate_std``
   (:data:`jbevo.models.presets.STREET_GAP_RATE_STD`).
 
