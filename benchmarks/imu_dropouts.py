@@ -65,12 +65,6 @@ AFTER = 50
 VARIANTS = ("published", "held", "widened")
 
 
-def gap_frames(flags: np.ndarray) -> list[tuple[int, int]]:
-    """The runs of flagged frames, each as ``(first, last)``."""
-    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
-    return [(int(a), int(b) - 1) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
-
-
 def scores(error: np.ndarray, gaps: list[tuple[int, int]]) -> dict:
     """``error``: absolute pitch/roll error (deg) at frames 1 .. N-1, shape ``(N - 1, 2)``."""
     frame = np.arange(1, len(error) + 1)
@@ -109,7 +103,7 @@ def main() -> None:
         on_line = np.isnan(marked.gyro).any(-1) & np.isfinite(drive.gyro).all(-1)
         truth = euler_zyx(drive.body_poses[:, :3, :3])[:, 1:3]
         velocity = planar_velocity(drive.body_poses, FRAME_STEP_S, args.speed_noise, 100 + int(name))
-        gaps = gap_frames(flags)
+        gaps = [(int(first), int(last)) for first, last in kitti.dropout_frames(flags)]
         # The truth comes from the same unit: its pitch and roll's second difference per frame
         # (deg), inside the dropouts and elsewhere.
         bend = np.degrees(np.abs(truth[:-2] - 2 * truth[1:-1] + truth[2:]).max(1))

@@ -167,16 +167,21 @@ def interpolated_frames(stream: ImuStream, rows_per_frame: int = 10, tolerance: 
     return np.concatenate([[False], curvature < tolerance, [False]])[:frames]
 
 
+def dropout_frames(flags: np.ndarray) -> np.ndarray:
+    """The runs of flagged frames (:func:`interpolated_frames`), each as its first and last frame,
+    shape ``(G, 2)`` (integers)."""
+    edges = np.diff(np.concatenate([[0], np.asarray(flags).astype(np.int8), [0]]))
+    return np.stack([np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1], -1)
+
+
 def dropout_spans(stream: ImuStream, rows_per_frame: int = 10, tolerance: float = INTERPOLATION_TOLERANCE) -> np.ndarray:
     """The time spans ``(start, end)`` (the stream's clock, shape ``(G, 2)``) of the straight lines
     over which a KITTI odometry IMU stream's dropouts were filled: a gap flagged at frames
-    ``a .. b`` (:func:`interpolated_frames`) runs from frame ``a - 1``'s recorded sample to frame
-    ``b + 1``'s; every row strictly inside is on the line."""
-    flags = interpolated_frames(stream, rows_per_frame, tolerance)
+    ``a .. b`` (:func:`interpolated_frames`, :func:`dropout_frames`) runs from frame ``a - 1``'s
+    recorded sample to frame ``b + 1``'s; every row strictly inside is on the line."""
+    runs = dropout_frames(interpolated_frames(stream, rows_per_frame, tolerance))
     knots = np.asarray(stream.times, float)[::rows_per_frame]
-    edges = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)  # gap frames [start, end)
-    return np.stack([knots[starts - 1], knots[ends]], -1) if len(starts) else np.zeros((0, 2))
+    return np.stack([knots[runs[:, 0] - 1], knots[runs[:, 1] + 1]], -1) if len(runs) else np.zeros((0, 2))
 
 
 #: Seconds within which a row's stamp counts as a dropout line's knot (a recorded sample), not
@@ -200,6 +205,15 @@ def on_dropout_lines(imu_times: np.ndarray, spans: np.ndarray, time_offset_s: fl
     return on_line
 
 
+def blank_dropout_rows(
+    imu_times: np.ndarray, gyro: np.ndarray, accel: np.ndarray, spans: np.ndarray, time_offset_s: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``gyro`` and ``accel`` (``imu_times``' shape plus 3) with the rows on a dropout's line
+    (:func:`on_dropout_lines`) NaN."""
+    on_line = on_dropout_lines(imu_times, spans, time_offset_s)[..., None]
+    return np.where(on_line, np.nan, gyro), np.where(on_line, np.nan, accel)
+
+
 def without_dropouts(seq: Sequence, spans: np.ndarray, time_offset_s: float = 0.0) -> Sequence:
     """``seq`` with the IMU rows that lie on a dropout's straight line (:func:`dropout_spans`)
     marked missing (NaN), so that a filter treats them as unmeasured instead of as a measured
@@ -210,9 +224,8 @@ def without_dropouts(seq: Sequence, spans: np.ndarray, time_offset_s: float = 0.
     stream's stamps (:attr:`jbevo.inertial.calibration.ImuCalibration.time_offset_s`; zero for a
     sequence read as published), so that the rows of a calibrated, resampled sequence are marked
     where they took their values from the line."""
-    mask = jnp.asarray(on_dropout_lines(np.asarray(seq.imu_times), spans, time_offset_s))[..., None]
-    marked = (jnp.where(mask, jnp.nan, seq.gyro), jnp.where(mask, jnp.nan, seq.accel))
-    return check(eqx.tree_at(lambda q: (q.gyro, q.accel), seq, marked))
+    gyro, accel = blank_dropout_rows(np.asarray(seq.imu_times), np.asarray(seq.gyro), np.asarray(seq.accel), spans, time_offset_s)
+    return check(eqx.tree_at(lambda q: (q.gyro, q.accel), seq, (jnp.asarray(gyro), jnp.asarray(accel))))
 
 
 def _imu_file(imu: str | Path, sequence: str) -> Path:
@@ -288,8 +301,7 @@ def _imu_blocks(
     stream = read_kitti_imu(imu_file, times)
     block_times, gyro, accel = group_blocks(stream, times)
     if imu_dropouts == "missing":
-        on_line = on_dropout_lines(block_times, dropout_spans(stream))[..., None]
-        gyro, accel = np.where(on_line, np.nan, gyro), np.where(on_line, np.nan, accel)
+        gyro, accel = blank_dropout_rows(block_times, gyro, accel, dropout_spans(stream))
     return block_times, gyro, accel
 
 
@@ -524,7 +536,9 @@ __all__ = [
     "IMU_DROPOUTS",
     "INTERPOLATION_TOLERANCE",
     "KNOT_TOLERANCE_S",
+    "blank_dropout_rows",
     "check_imu_dropouts",
+    "dropout_frames",
     "dropout_spans",
     "frame_curvature",
     "has_imu",

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jbevo.data.imu_stream import resample_blocks
-from jbevo.data.kitti import check_imu_dropouts, dropout_spans, on_dropout_lines, read_kitti_imu, read_run
+from jbevo.data.kitti import blank_dropout_rows, check_imu_dropouts, dropout_spans, read_kitti_imu, read_run
 from jbevo.data.kitti_frames import body_poses_from_kitti
 from jbevo.data.pose_files import read_kitti
 from jbevo.data.sequence import Sequence, check
@@ -89,7 +89,7 @@ def calibrated_drive(
 ) -> CalibratedImuDrive:
     """Sequence ``name`` with its day's calibration (or ``calibration``) applied. ``imu_dropouts``
     ``missing``: the resampled rows that take their values from a dropout's straight line NaN
-    (:func:`jbevo.data.kitti.on_dropout_lines` at the calibration's time offset; the calibration
+    (:func:`jbevo.data.kitti.blank_dropout_rows` at the calibration's time offset; the calibration
     itself is fitted on the published rows)."""
     check_imu_dropouts(imu_dropouts)
     drive = calibration_drive(poses_folder, imu_folder, name)
@@ -97,8 +97,7 @@ def calibrated_drive(
     gravity = cal.gravity_up(drive, c)
     times, gyro, accel = resample_blocks(cal.apply(drive.imu, c), drive.frame_times, SAMPLES_PER_FRAME)
     if imu_dropouts == "missing":
-        on_line = on_dropout_lines(times, dropout_spans(drive.imu), c.time_offset_s)[..., None]
-        gyro, accel = np.where(on_line, np.nan, gyro), np.where(on_line, np.nan, accel)
+        gyro, accel = blank_dropout_rows(times, gyro, accel, dropout_spans(drive.imu), c.time_offset_s)
     return CalibratedImuDrive(drive.frame_times, cal.level_poses(drive.body_poses, gravity.up), times, gyro, accel, gravity)
 
 
