@@ -96,6 +96,8 @@ def test_frames_interpolated_over_a_dropout_are_found():
     stream = ImuStream(np.arange(len(rows)) * 0.01, rows[:, 3:], rows[:, :3])
     np.testing.assert_array_equal(np.flatnonzero(kitti.interpolated_frames(stream, per)), np.arange(9, 14))
     np.testing.assert_allclose(kitti.dropout_spans(stream, per), [[a * 0.01, b * 0.01]])
+    np.testing.assert_array_equal(kitti.dropout_frames(kitti.interpolated_frames(stream, per)), [[9, 13]])
+    assert kitti.dropout_frames(np.zeros(5, bool)).shape == (0, 2)
     # Without the dropout, the samples' own noise keeps every frame off the line.
     noisy = rows + rng.normal(0.0, 0.03, rows.shape)
     assert not kitti.interpolated_frames(ImuStream(stream.times, noisy[:, 3:], noisy[:, :3]), per).any()
